@@ -1,0 +1,1 @@
+//! BSDFs (being written).

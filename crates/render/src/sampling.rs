@@ -1,0 +1,236 @@
+//! Random numbers and the warps that turn them into directions and points.
+//!
+//! [`Rng`] is a PCG32 stream. Every camera sample gets its own stream, keyed by the render seed,
+//! the pixel and the sample index, so an image does not depend on how work is split over threads.
+
+use glam::{Vec2, Vec3};
+use std::f32::consts::{FRAC_1_PI, PI};
+
+/// PCG32 (O'Neill 2014): 64-bit LCG state, 32-bit xorshift-rotate output.
+#[derive(Clone, Debug)]
+pub struct Rng {
+    state: u64,
+    inc: u64,
+}
+
+const PCG_MULT: u64 = 6364136223846793005;
+
+/// SplitMix64 finaliser: a bijective 64-bit mix used to derive independent stream keys.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58476d1ce4e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d049bb133111eb);
+    z ^ (z >> 31)
+}
+
+impl Rng {
+    /// A stream seeded by `seed`, on stream number `stream`.
+    pub fn new(seed: u64, stream: u64) -> Self {
+        let mut rng = Rng { state: 0, inc: (stream << 1) | 1 };
+        rng.next_u32();
+        rng.state = rng.state.wrapping_add(seed);
+        rng.next_u32();
+        rng
+    }
+
+    /// The stream of camera sample `sample` of pixel `pixel` in a render seeded by `seed`.
+    pub fn for_sample(seed: u64, pixel: u64, sample: u64) -> Self {
+        let key = mix64(seed ^ mix64(pixel.wrapping_mul(0x9e3779b97f4a7c15) ^ mix64(sample)));
+        Rng::new(key, mix64(key ^ 0xda3e39cb94b95bdb))
+    }
+
+    /// Next uniform 32-bit integer.
+    #[inline]
+    pub fn next_u32(&mut self) -> u32 {
+        let old = self.state;
+        self.state = old.wrapping_mul(PCG_MULT).wrapping_add(self.inc);
+        let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
+        let rot = (old >> 59) as u32;
+        xorshifted.rotate_right(rot)
+    }
+
+    /// Uniform float in [0, 1).
+    #[inline]
+    pub fn next_f32(&mut self) -> f32 {
+        (self.next_u32() >> 8) as f32 * (1.0 / 16_777_216.0)
+    }
+
+    /// Two uniform floats in [0, 1)².
+    #[inline]
+    pub fn next_2d(&mut self) -> Vec2 {
+        let x = self.next_f32();
+        Vec2::new(x, self.next_f32())
+    }
+}
+
+/// Uniform point on the unit disk by the concentric map (Shirley–Chiu).
+pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
+    let a = 2.0 * u - Vec2::ONE;
+    if a.x == 0.0 && a.y == 0.0 {
+        return Vec2::ZERO;
+    }
+    let (r, phi) = if a.x.abs() > a.y.abs() {
+        (a.x, (PI / 4.0) * (a.y / a.x))
+    } else {
+        (a.y, PI / 2.0 - (PI / 4.0) * (a.x / a.y))
+    };
+    Vec2::new(r * phi.cos(), r * phi.sin())
+}
+
+/// Cosine-weighted direction on the +z hemisphere.
+pub fn square_to_cosine_hemisphere(u: Vec2) -> Vec3 {
+    let d = square_to_disk_concentric(u);
+    let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+    Vec3::new(d.x, d.y, z)
+}
+
+/// Density of [`square_to_cosine_hemisphere`] in solid angle.
+#[inline]
+pub fn cosine_hemisphere_pdf(v: Vec3) -> f32 {
+    v.z.max(0.0) * FRAC_1_PI
+}
+
+/// Uniform direction on the unit sphere.
+pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
+    let z = 1.0 - 2.0 * u.y;
+    let r = (1.0 - z * z).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.x;
+    Vec3::new(r * phi.cos(), r * phi.sin(), z)
+}
+
+/// Density of [`square_to_uniform_sphere`].
+pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
+
+/// Uniform direction in the cone of half-angle `acos(cos_max)` around +z.
+pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
+    let cos_t = 1.0 - u.y * (1.0 - cos_max);
+    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
+    let phi = 2.0 * PI * u.x;
+    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+}
+
+/// Density of [`square_to_uniform_cone`].
+#[inline]
+pub fn uniform_cone_pdf(cos_max: f32) -> f32 {
+    1.0 / (2.0 * PI * (1.0 - cos_max))
+}
+
+/// Uniform barycentrics (b1, b2) on a triangle.
+pub fn square_to_triangle(u: Vec2) -> Vec2 {
+    let t = u.x.sqrt();
+    Vec2::new(1.0 - t, u.y * t)
+}
+
+/// A discrete distribution sampled by inverting its cumulative sum.
+#[derive(Clone, Debug, Default)]
+pub struct Distribution1D {
+    cdf: Vec<f32>,
+    total: f32,
+}
+
+impl Distribution1D {
+    /// Builds from non-negative weights; `None` when they sum to zero or are not finite.
+    pub fn new(weights: &[f32]) -> Option<Self> {
+        let mut cdf = Vec::with_capacity(weights.len() + 1);
+        let mut acc = 0.0f64;
+        cdf.push(0.0);
+        for &w in weights {
+            if !(w >= 0.0) || !w.is_finite() {
+                return None;
+            }
+            acc += w as f64;
+            cdf.push(acc as f32);
+        }
+        if !(acc > 0.0) {
+            return None;
+        }
+        let total = acc as f32;
+        for c in cdf.iter_mut() {
+            *c /= total;
+        }
+        *cdf.last_mut().unwrap() = 1.0;
+        Some(Distribution1D { cdf, total })
+    }
+
+    /// Number of entries.
+    pub fn len(&self) -> usize {
+        self.cdf.len() - 1
+    }
+
+    /// True when there are no entries.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Sum of the weights.
+    pub fn total(&self) -> f32 {
+        self.total
+    }
+
+    /// Probability of entry `i`.
+    #[inline]
+    pub fn pmf(&self, i: usize) -> f32 {
+        self.cdf[i + 1] - self.cdf[i]
+    }
+
+    /// Samples an entry; returns it with `u` re-scaled to [0, 1) inside that entry.
+    pub fn sample(&self, u: f32) -> (usize, f32) {
+        let n = self.len();
+        let i = self.cdf.partition_point(|&c| c <= u).saturating_sub(1).min(n - 1);
+        let width = self.pmf(i);
+        let rem = if width > 0.0 { ((u - self.cdf[i]) / width).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
+        (i, rem)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn streams_differ_and_repeat() {
+        let a: Vec<u32> = (0..4).map(|_| 0).scan(Rng::for_sample(1, 2, 3), |r, _| Some(r.next_u32())).collect();
+        let b: Vec<u32> = (0..4).map(|_| 0).scan(Rng::for_sample(1, 2, 3), |r, _| Some(r.next_u32())).collect();
+        let c: Vec<u32> = (0..4).map(|_| 0).scan(Rng::for_sample(1, 2, 4), |r, _| Some(r.next_u32())).collect();
+        assert_eq!(a, b);
+        assert_ne!(a, c);
+    }
+
+    #[test]
+    fn uniform_floats_have_the_right_mean() {
+        let mut r = Rng::new(7, 0);
+        let n = 100_000;
+        let mean: f64 = (0..n).map(|_| r.next_f32() as f64).sum::<f64>() / n as f64;
+        assert!((mean - 0.5).abs() < 0.005, "{mean}");
+    }
+
+    #[test]
+    fn distribution_samples_follow_weights() {
+        let d = Distribution1D::new(&[1.0, 0.0, 3.0]).unwrap();
+        let mut counts = [0usize; 3];
+        let mut r = Rng::new(3, 1);
+        for _ in 0..40_000 {
+            counts[d.sample(r.next_f32()).0] += 1;
+        }
+        assert_eq!(counts[1], 0);
+        let f = counts[2] as f32 / 40_000.0;
+        assert!((f - 0.75).abs() < 0.01, "{f}");
+        assert!(Distribution1D::new(&[0.0, 0.0]).is_none());
+        assert!(Distribution1D::new(&[f32::NAN]).is_none());
+    }
+
+    #[test]
+    fn cosine_hemisphere_is_normalised() {
+        let mut r = Rng::new(5, 5);
+        // E[1/pdf] over samples of pdf equals the hemisphere's solid angle 2π.
+        let n = 200_000;
+        let s: f64 = (0..n)
+            .map(|_| {
+                let v = square_to_cosine_hemisphere(r.next_2d());
+                1.0 / cosine_hemisphere_pdf(v).max(1e-6) as f64
+            })
+            .sum::<f64>()
+            / n as f64;
+        assert!((s - 2.0 * std::f64::consts::PI).abs() < 0.1, "{s}");
+    }
+}
