@@ -1,8 +1,22 @@
 //! tessera's renderer: scene loading (a Mitsuba 3 XML subset), geometry and BVH, BSDFs,
 //! emitters, the path-tracing integrator and the film.
+//!
+//! A [`scene::Scene`] comes from [`loader::load_file`] (Mitsuba 3 XML, read by [`xml`]); it holds
+//! [`geometry::Shape`]s indexed by a BVH ([`geometry::Accel`]), [`bsdf::BsdfDesc`] materials,
+//! [`emitter::Emitter`]s and a [`camera::Camera`]. [`integrator::render`] turns it into a
+//! [`film::Image`].
 
 pub mod bsdf;
+pub mod camera;
+pub mod emitter;
 pub mod error;
+pub mod film;
+pub mod geometry;
+pub mod integrator;
+pub mod loader;
 pub mod math;
+pub mod mesh;
 pub mod sampling;
+pub mod scene;
 pub mod texture;
+pub mod xml;

@@ -1,0 +1,652 @@
+//! Shapes, the acceleration structure and surface interactions.
+//!
+//! Every shape is reduced to primitives (triangles, spheres, disks) in world space. A wide BVH
+//! from the `obvhs` crate indexes them; [`Accel`] hides that crate behind two queries
+//! (closest hit, any hit) so another backend can be swapped in.
+
+use crate::math::Frame;
+use crate::mesh::TriangleMesh;
+use glam::{Affine3A, Mat3, Vec2, Vec3, Vec3A};
+use obvhs::aabb::Aabb;
+use std::f32::consts::PI;
+
+/// A ray with its valid parameter interval.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    /// Origin.
+    pub o: Vec3,
+    /// Unit direction.
+    pub d: Vec3,
+    /// Smallest accepted distance.
+    pub tmin: f32,
+    /// Largest accepted distance.
+    pub tmax: f32,
+}
+
+impl Ray {
+    /// A ray over (0, ∞).
+    pub fn new(o: Vec3, d: Vec3) -> Self {
+        Ray { o, d, tmin: 0.0, tmax: f32::INFINITY }
+    }
+
+    /// The point at distance `t`.
+    #[inline]
+    pub fn at(&self, t: f32) -> Vec3 {
+        self.o + self.d * t
+    }
+}
+
+/// The geometric kinds of shape.
+#[derive(Clone, Debug)]
+pub enum ShapeGeometry {
+    /// A triangle mesh in world space.
+    Mesh {
+        /// Vertices, normals, uvs and triangles, already transformed to world space.
+        mesh: TriangleMesh,
+        /// Cumulative triangle areas for sampling, and the total area.
+        area: crate::sampling::Distribution1D,
+    },
+    /// A sphere; `rotation` maps object axes to world axes (for uv).
+    Sphere {
+        /// Centre in world space.
+        center: Vec3,
+        /// Radius in world units.
+        radius: f32,
+        /// Object-to-world rotation (orthonormal).
+        rotation: Mat3,
+    },
+    /// Mitsuba's unit disk in the xy plane, placed by an affine transform.
+    Disk {
+        /// Object to world.
+        to_world: Affine3A,
+        /// World to object.
+        to_object: Affine3A,
+        /// World-space normal of the disk (before `flip_normals`).
+        normal: Vec3,
+        /// World-space area.
+        area: f32,
+    },
+}
+
+/// A shape: geometry plus what is bound to it.
+#[derive(Clone, Debug)]
+pub struct Shape {
+    /// Its geometry.
+    pub geometry: ShapeGeometry,
+    /// Index into the scene's materials.
+    pub material: u32,
+    /// Index into the scene's emitters when the shape is an area light.
+    pub emitter: Option<u32>,
+    /// Mitsuba's `flip_normals`.
+    pub flip_normals: bool,
+    /// Mitsuba's `face_normals` (ignore vertex normals).
+    pub face_normals: bool,
+    /// Name for messages (the XML id or the plugin type).
+    pub name: String,
+}
+
+/// Local differential geometry at a ray hit.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceInteraction {
+    /// Hit distance along the ray.
+    pub t: f32,
+    /// Position.
+    pub p: Vec3,
+    /// Geometric normal (flipped when the shape says so).
+    pub ng: Vec3,
+    /// Shading frame; `sh.n` is the shading normal.
+    pub sh: Frame,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// ∂p/∂u and ∂p/∂v.
+    pub dpdu: Vec3,
+    /// See `dpdu`.
+    pub dpdv: Vec3,
+    /// ∂n/∂u and ∂n/∂v of the shading normal.
+    pub dndu: Vec3,
+    /// See `dndu`.
+    pub dndv: Vec3,
+    /// Index of the shape hit.
+    pub shape: u32,
+}
+
+/// Which primitive a BVH leaf refers to.
+#[derive(Clone, Copy, Debug)]
+struct PrimRef {
+    shape: u32,
+    /// Triangle index within a mesh; unused for spheres and disks.
+    index: u32,
+}
+
+/// Precomputed triangle for intersection: v0 and two edges.
+#[derive(Clone, Copy, Debug)]
+struct TriPrim {
+    v0: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+}
+
+/// The acceleration structure over all primitives of a scene.
+pub struct Accel {
+    bvh: obvhs::cwbvh::CwBvh,
+    prims: Vec<PrimRef>,
+    tris: Vec<TriPrim>,
+    /// Scene bounds (for directional and environment lights).
+    pub bounds_min: Vec3,
+    /// See `bounds_min`.
+    pub bounds_max: Vec3,
+}
+
+/// What the BVH reports before the interaction is completed.
+#[derive(Clone, Copy, Debug)]
+pub struct PreliminaryHit {
+    /// Distance.
+    pub t: f32,
+    /// Shape index.
+    pub shape: u32,
+    /// Triangle index for meshes.
+    pub index: u32,
+    /// Barycentrics (b1, b2) for triangles.
+    pub bary: Vec2,
+}
+
+#[inline]
+fn intersect_triangle(tri: &TriPrim, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, Vec2)> {
+    let pvec = d.cross(tri.e2);
+    let det = tri.e1.dot(pvec);
+    if det.abs() < 1e-20 {
+        return None;
+    }
+    let inv_det = 1.0 / det;
+    let tvec = o - tri.v0;
+    let u = tvec.dot(pvec) * inv_det;
+    if !(0.0..=1.0).contains(&u) {
+        return None;
+    }
+    let qvec = tvec.cross(tri.e1);
+    let v = d.dot(qvec) * inv_det;
+    if v < 0.0 || u + v > 1.0 {
+        return None;
+    }
+    let t = tri.e2.dot(qvec) * inv_det;
+    if t > tmin && t < tmax {
+        Some((t, Vec2::new(u, v)))
+    } else {
+        None
+    }
+}
+
+#[inline]
+fn intersect_sphere(center: Vec3, radius: f32, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+    // Double precision keeps grazing and distant hits stable.
+    let oc = (o - center).as_dvec3();
+    let d = d.as_dvec3();
+    let b = oc.dot(d);
+    let c = oc.length_squared() - (radius as f64) * (radius as f64);
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let sq = disc.sqrt();
+    let t0 = (-b - sq) as f32;
+    let t1 = (-b + sq) as f32;
+    if t0 > tmin && t0 < tmax {
+        Some(t0)
+    } else if t1 > tmin && t1 < tmax {
+        Some(t1)
+    } else {
+        None
+    }
+}
+
+#[inline]
+fn intersect_disk(to_object: &Affine3A, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+    let lo = to_object.transform_point3(o);
+    let ld = to_object.transform_vector3(d);
+    if ld.z == 0.0 {
+        return None;
+    }
+    let t = -lo.z / ld.z;
+    if !(t > tmin && t < tmax) {
+        return None;
+    }
+    let p = lo + ld * t;
+    if p.x * p.x + p.y * p.y <= 1.0 {
+        Some(t)
+    } else {
+        None
+    }
+}
+
+impl Accel {
+    /// Builds the BVH over every primitive of `shapes`.
+    pub fn build(shapes: &[Shape]) -> Self {
+        let mut aabbs = Vec::new();
+        let mut prims = Vec::new();
+        let mut tris_unordered = Vec::new();
+        for (si, shape) in shapes.iter().enumerate() {
+            match &shape.geometry {
+                ShapeGeometry::Mesh { mesh, .. } => {
+                    for (ti, idx) in mesh.indices.iter().enumerate() {
+                        let [a, b, c] = idx.map(|i| mesh.positions[i as usize]);
+                        let mut bb = Aabb::from_point(a.into());
+                        bb.extend(b.into());
+                        bb.extend(c.into());
+                        aabbs.push(bb);
+                        prims.push(PrimRef { shape: si as u32, index: ti as u32 });
+                        tris_unordered.push(TriPrim { v0: a, e1: b - a, e2: c - a });
+                    }
+                }
+                ShapeGeometry::Sphere { center, radius, .. } => {
+                    let r = Vec3::splat(*radius);
+                    aabbs.push(Aabb::new((*center - r).into(), (*center + r).into()));
+                    prims.push(PrimRef { shape: si as u32, index: 0 });
+                    tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
+                }
+                ShapeGeometry::Disk { to_world, .. } => {
+                    // Bound the disk by its square's four corners.
+                    let mut bb = Aabb::empty();
+                    for (x, y) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                        bb.extend(Vec3A::from(to_world.transform_point3(Vec3::new(x, y, 0.0))));
+                    }
+                    // Give flat boxes a little thickness.
+                    let pad = Vec3A::splat(1e-5 * (1.0 + bb.diagonal().length()));
+                    aabbs.push(Aabb::new(bb.min - pad, bb.max + pad));
+                    prims.push(PrimRef { shape: si as u32, index: 0 });
+                    tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
+                }
+            }
+        }
+        let mut bounds = Aabb::empty();
+        for bb in &aabbs {
+            bounds = bounds.union(bb);
+        }
+        let bvh = if aabbs.is_empty() {
+            obvhs::cwbvh::CwBvh::default()
+        } else {
+            obvhs::cwbvh::builder::build_cwbvh(
+                &aabbs,
+                obvhs::BvhBuildParams::medium_build(),
+                &mut std::time::Duration::default(),
+            )
+        };
+        // Reorder primitives to BVH leaf order so traversal reads them sequentially.
+        let (prims, tris) = if aabbs.is_empty() {
+            (prims, tris_unordered)
+        } else {
+            let order = &bvh.primitive_indices;
+            (
+                order.iter().map(|&i| prims[i as usize]).collect(),
+                order.iter().map(|&i| tris_unordered[i as usize]).collect(),
+            )
+        };
+        let (bounds_min, bounds_max) = if aabbs.is_empty() {
+            (Vec3::ZERO, Vec3::ZERO)
+        } else {
+            (Vec3::from(bounds.min), Vec3::from(bounds.max))
+        };
+        Accel { bvh, prims, tris, bounds_min, bounds_max }
+    }
+
+    #[inline]
+    fn intersect_prim(&self, shapes: &[Shape], i: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, Vec2)> {
+        let pr = self.prims[i];
+        match &shapes[pr.shape as usize].geometry {
+            ShapeGeometry::Mesh { .. } => intersect_triangle(&self.tris[i], o, d, tmin, tmax),
+            ShapeGeometry::Sphere { center, radius, .. } => {
+                intersect_sphere(*center, *radius, o, d, tmin, tmax).map(|t| (t, Vec2::ZERO))
+            }
+            ShapeGeometry::Disk { to_object, .. } => {
+                intersect_disk(to_object, o, d, tmin, tmax).map(|t| (t, Vec2::ZERO))
+            }
+        }
+    }
+
+    /// The closest hit along `ray`, if any.
+    pub fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        if self.prims.is_empty() {
+            return None;
+        }
+        let bray = obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax);
+        let mut hit = obvhs::ray::RayHit::none();
+        let mut best_bary = Vec2::ZERO;
+        let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
+            match self.intersect_prim(shapes, id, ray.o, ray.d, ray.tmin, r.tmax) {
+                Some((t, bary)) => {
+                    best_bary = bary;
+                    t
+                }
+                None => f32::INFINITY,
+            }
+        });
+        // `ray_traverse` records the last improving hit; barycentrics were stored with it.
+        if !found {
+            return None;
+        }
+        let pr = self.prims[hit.primitive_id as usize];
+        Some(PreliminaryHit { t: hit.t, shape: pr.shape, index: pr.index, bary: best_bary })
+    }
+
+    /// True when anything blocks `ray` within its interval.
+    pub fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
+        if self.prims.is_empty() {
+            return false;
+        }
+        let bray = obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax);
+        !self.bvh.ray_traverse_miss(bray, |r, id| {
+            self.intersect_prim(shapes, id, ray.o, ray.d, ray.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
+        })
+    }
+}
+
+/// Completes a BVH hit into a full surface interaction.
+pub fn interaction(shapes: &[Shape], ray: &Ray, hit: &PreliminaryHit) -> SurfaceInteraction {
+    let shape = &shapes[hit.shape as usize];
+    let p_ray = ray.at(hit.t);
+    let mut si = match &shape.geometry {
+        ShapeGeometry::Mesh { mesh, .. } => mesh_interaction(mesh, hit, shape.face_normals),
+        ShapeGeometry::Sphere { center, radius, rotation } => sphere_interaction(*center, *radius, rotation, p_ray),
+        ShapeGeometry::Disk { to_world, to_object, normal, .. } => disk_interaction(to_world, to_object, *normal, p_ray),
+    };
+    si.t = hit.t;
+    si.shape = hit.shape;
+    if shape.flip_normals {
+        si.ng = -si.ng;
+        si.sh = Frame { s: si.sh.s, t: -si.sh.t, n: -si.sh.n };
+        si.dndu = -si.dndu;
+        si.dndv = -si.dndv;
+    }
+    si
+}
+
+fn empty_interaction(p: Vec3, n: Vec3) -> SurfaceInteraction {
+    SurfaceInteraction {
+        t: 0.0,
+        p,
+        ng: n,
+        sh: Frame::from_normal(n),
+        uv: Vec2::ZERO,
+        dpdu: Vec3::ZERO,
+        dpdv: Vec3::ZERO,
+        dndu: Vec3::ZERO,
+        dndv: Vec3::ZERO,
+        shape: 0,
+    }
+}
+
+/// Solves for (∂f/∂u, ∂f/∂v) given f's differences along two triangle edges and the uv deltas.
+#[inline]
+fn uv_derivatives(duv1: Vec2, duv2: Vec2, d1: Vec3, d2: Vec3) -> Option<(Vec3, Vec3)> {
+    let det = duv1.x * duv2.y - duv1.y * duv2.x;
+    if det.abs() < 1e-20 || !det.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / det;
+    Some(((d1 * duv2.y - d2 * duv1.y) * inv, (d2 * duv1.x - d1 * duv2.x) * inv))
+}
+
+fn mesh_interaction(mesh: &TriangleMesh, hit: &PreliminaryHit, face_normals: bool) -> SurfaceInteraction {
+    let [i0, i1, i2] = mesh.indices[hit.index as usize].map(|i| i as usize);
+    let (p0, p1, p2) = (mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]);
+    let (b1, b2) = (hit.bary.x, hit.bary.y);
+    let b0 = 1.0 - b1 - b2;
+    let p = p0 * b0 + p1 * b1 + p2 * b2;
+    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    let (uv0, uv1, uv2) = match &mesh.uvs {
+        Some(uv) => (uv[i0], uv[i1], uv[i2]),
+        None => (Vec2::ZERO, Vec2::X, Vec2::Y),
+    };
+    let uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
+    let (duv1, duv2) = (uv1 - uv0, uv2 - uv0);
+    let (dpdu, dpdv) =
+        uv_derivatives(duv1, duv2, p1 - p0, p2 - p0).unwrap_or_else(|| (p1 - p0, p2 - p0));
+    let mut si = empty_interaction(p, ng);
+    si.uv = uv;
+    si.dpdu = dpdu;
+    si.dpdv = dpdv;
+    let mut n = ng;
+    if let (Some(normals), false) = (&mesh.normals, face_normals) {
+        let (n0, n1, n2) = (normals[i0], normals[i1], normals[i2]);
+        let nn = n0 * b0 + n1 * b1 + n2 * b2;
+        let len = nn.length();
+        if len > 1e-12 {
+            n = nn / len;
+            if let Some((dndu_raw, dndv_raw)) = uv_derivatives(duv1, duv2, n1 - n0, n2 - n0) {
+                // Derivative of the normalised interpolant.
+                si.dndu = (dndu_raw - n * n.dot(dndu_raw)) / len;
+                si.dndv = (dndv_raw - n * n.dot(dndv_raw)) / len;
+            }
+        }
+    }
+    si.sh = Frame::from_normal_tangent(n, dpdu);
+    si
+}
+
+fn sphere_interaction(center: Vec3, radius: f32, rotation: &Mat3, p_ray: Vec3) -> SurfaceInteraction {
+    let n = (p_ray - center).normalize();
+    // Re-project onto the surface to remove the error of the ray parameter.
+    let p = center + n * radius;
+    let local = rotation.transpose() * n;
+    let theta = local.z.clamp(-1.0, 1.0).acos();
+    let mut phi = local.y.atan2(local.x);
+    if phi < 0.0 {
+        phi += 2.0 * PI;
+    }
+    let (sin_phi, cos_phi) = phi.sin_cos();
+    let (sin_theta, cos_theta) = theta.sin_cos();
+    let dpdu_l = Vec3::new(-local.y, local.x, 0.0) * (2.0 * PI * radius);
+    let dpdv_l = Vec3::new(cos_phi * cos_theta, sin_phi * cos_theta, -sin_theta) * (PI * radius);
+    let dpdu = *rotation * dpdu_l;
+    let dpdv = *rotation * dpdv_l;
+    let mut si = empty_interaction(p, n);
+    si.uv = Vec2::new(phi / (2.0 * PI), theta / PI);
+    si.dpdu = dpdu;
+    si.dpdv = dpdv;
+    si.dndu = dpdu / radius;
+    si.dndv = dpdv / radius;
+    si.sh = Frame::from_normal_tangent(n, dpdu);
+    si
+}
+
+fn disk_interaction(to_world: &Affine3A, to_object: &Affine3A, normal: Vec3, p_ray: Vec3) -> SurfaceInteraction {
+    let local = to_object.transform_point3(p_ray);
+    let local = Vec3::new(local.x, local.y, 0.0);
+    let p = to_world.transform_point3(local);
+    let r = (local.x * local.x + local.y * local.y).sqrt();
+    let mut phi = local.y.atan2(local.x);
+    if phi < 0.0 {
+        phi += 2.0 * PI;
+    }
+    let (sin_phi, cos_phi) = phi.sin_cos();
+    let dpdu = to_world.transform_vector3(Vec3::new(cos_phi, sin_phi, 0.0));
+    let dpdv = to_world.transform_vector3(Vec3::new(-sin_phi, cos_phi, 0.0) * (2.0 * PI * r));
+    let mut si = empty_interaction(p, normal);
+    si.uv = Vec2::new(r, phi / (2.0 * PI));
+    si.dpdu = dpdu;
+    si.dpdv = dpdv;
+    si.sh = Frame::from_normal_tangent(normal, dpdu);
+    si
+}
+
+/// A point sampled on a shape's surface.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceSample {
+    /// Position.
+    pub p: Vec3,
+    /// Normal (after `flip_normals`).
+    pub n: Vec3,
+    /// Density with respect to area.
+    pub pdf_area: f32,
+}
+
+impl Shape {
+    /// Total surface area.
+    pub fn area(&self) -> f32 {
+        match &self.geometry {
+            ShapeGeometry::Mesh { area, .. } => area.total(),
+            ShapeGeometry::Sphere { radius, .. } => 4.0 * PI * radius * radius,
+            ShapeGeometry::Disk { area, .. } => *area,
+        }
+    }
+
+    /// Samples a point uniformly by area.
+    pub fn sample_area(&self, u: Vec2) -> SurfaceSample {
+        let flip = if self.flip_normals { -1.0 } else { 1.0 };
+        match &self.geometry {
+            ShapeGeometry::Mesh { mesh, area } => {
+                let (ti, ux) = area.sample(u.x);
+                let [a, b, c] = mesh.indices[ti].map(|i| mesh.positions[i as usize]);
+                let bary = crate::sampling::square_to_triangle(Vec2::new(ux, u.y));
+                let p = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
+                let mut n = (b - a).cross(c - a).normalize_or_zero();
+                if let (Some(normals), false) = (&mesh.normals, self.face_normals) {
+                    let [na, nb, nc] = mesh.indices[ti].map(|i| normals[i as usize]);
+                    n = (na * (1.0 - bary.x - bary.y) + nb * bary.x + nc * bary.y).normalize_or(n);
+                }
+                SurfaceSample { p, n: n * flip, pdf_area: 1.0 / area.total() }
+            }
+            ShapeGeometry::Sphere { center, radius, .. } => {
+                let n = crate::sampling::square_to_uniform_sphere(u);
+                SurfaceSample { p: *center + n * *radius, n: n * flip, pdf_area: 1.0 / self.area() }
+            }
+            ShapeGeometry::Disk { to_world, normal, area, .. } => {
+                let d = crate::sampling::square_to_disk_concentric(u);
+                let p = to_world.transform_point3(Vec3::new(d.x, d.y, 0.0));
+                SurfaceSample { p, n: *normal * flip, pdf_area: 1.0 / *area }
+            }
+        }
+    }
+}
+
+/// Builds a mesh shape's area distribution; `None` when the mesh has no area.
+pub fn mesh_area_distribution(mesh: &TriangleMesh) -> Option<crate::sampling::Distribution1D> {
+    let areas: Vec<f32> = mesh
+        .indices
+        .iter()
+        .map(|idx| {
+            let [a, b, c] = idx.map(|i| mesh.positions[i as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .collect();
+    crate::sampling::Distribution1D::new(&areas)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad() -> TriangleMesh {
+        TriangleMesh {
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            normals: None,
+            uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
+            indices: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    fn mesh_shape(mesh: TriangleMesh) -> Shape {
+        let area = mesh_area_distribution(&mesh).unwrap();
+        Shape {
+            geometry: ShapeGeometry::Mesh { mesh, area },
+            material: 0,
+            emitter: None,
+            flip_normals: false,
+            face_normals: false,
+            name: "test".into(),
+        }
+    }
+
+    #[test]
+    fn quad_hit_has_mitsuba_uv_and_derivatives() {
+        let shapes = vec![mesh_shape(quad())];
+        let accel = Accel::build(&shapes);
+        let ray = Ray::new(Vec3::new(0.5, -0.5, 3.0), -Vec3::Z);
+        let hit = accel.intersect(&shapes, &ray).expect("hit");
+        assert!((hit.t - 3.0).abs() < 1e-5);
+        let si = interaction(&shapes, &ray, &hit);
+        assert!((si.uv - Vec2::new(0.75, 0.25)).length() < 1e-5, "{:?}", si.uv);
+        assert!((si.dpdu - Vec3::new(2.0, 0.0, 0.0)).length() < 1e-5);
+        assert!((si.dpdv - Vec3::new(0.0, 2.0, 0.0)).length() < 1e-5);
+        assert!((si.ng - Vec3::Z).length() < 1e-6);
+        assert!(accel.occluded(&shapes, &ray));
+        let miss = Ray::new(Vec3::new(1.5, 0.0, 3.0), -Vec3::Z);
+        assert!(accel.intersect(&shapes, &miss).is_none());
+    }
+
+    #[test]
+    fn sphere_derivatives_match_finite_differences() {
+        let rotation = Mat3::from_rotation_y(0.3) * Mat3::from_rotation_x(-0.7);
+        let center = Vec3::new(0.2, -0.1, 0.4);
+        let shapes = vec![Shape {
+            geometry: ShapeGeometry::Sphere { center, radius: 0.8, rotation },
+            material: 0,
+            emitter: None,
+            flip_normals: false,
+            face_normals: false,
+            name: "s".into(),
+        }];
+        let accel = Accel::build(&shapes);
+        let ray = Ray::new(Vec3::new(0.5, 0.3, 5.0), Vec3::new(-0.05, -0.05, -1.0).normalize());
+        let hit = accel.intersect(&shapes, &ray).unwrap();
+        let si = interaction(&shapes, &ray, &hit);
+        assert!(((si.p - center).length() - 0.8).abs() < 1e-5);
+        // Surface position as a function of uv, in object space rotated to world.
+        let pos = |u: f32, v: f32| {
+            let (phi, theta) = (u * 2.0 * PI, v * PI);
+            center + rotation * Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()) * 0.8
+        };
+        assert!((pos(si.uv.x, si.uv.y) - si.p).length() < 1e-4);
+        let h = 1e-3;
+        let fd_u = (pos(si.uv.x + h, si.uv.y) - pos(si.uv.x - h, si.uv.y)) / (2.0 * h);
+        let fd_v = (pos(si.uv.x, si.uv.y + h) - pos(si.uv.x, si.uv.y - h)) / (2.0 * h);
+        assert!((fd_u - si.dpdu).length() < 2e-3 * si.dpdu.length(), "{fd_u} {}", si.dpdu);
+        assert!((fd_v - si.dpdv).length() < 2e-3 * si.dpdv.length(), "{fd_v} {}", si.dpdv);
+    }
+
+    #[test]
+    fn interpolated_normal_derivatives_match_finite_differences() {
+        let mut mesh = quad();
+        mesh.normals = Some(vec![
+            Vec3::new(-0.3, -0.2, 1.0).normalize(),
+            Vec3::new(0.4, -0.1, 1.0).normalize(),
+            Vec3::new(0.2, 0.3, 1.0).normalize(),
+            Vec3::new(-0.2, 0.4, 1.0).normalize(),
+        ]);
+        let shapes = vec![mesh_shape(mesh)];
+        let accel = Accel::build(&shapes);
+        let normal_at = |x: f32, y: f32| {
+            let ray = Ray::new(Vec3::new(x, y, 2.0), -Vec3::Z);
+            let hit = accel.intersect(&shapes, &ray).unwrap();
+            interaction(&shapes, &ray, &hit)
+        };
+        let si = normal_at(0.3, -0.4);
+        // u = (x+1)/2, so a step h in u is 2h in x.
+        let h = 1e-3;
+        let fd = (normal_at(0.3 + 2.0 * h, -0.4).sh.n - normal_at(0.3 - 2.0 * h, -0.4).sh.n) / (2.0 * h);
+        assert!((fd - si.dndu).length() < 1e-2 * si.dndu.length().max(1e-3), "{fd} {}", si.dndu);
+    }
+
+    #[test]
+    fn disk_uv_follows_mitsuba() {
+        let to_world = Affine3A::from_scale(Vec3::splat(2.0));
+        let shapes = vec![Shape {
+            geometry: ShapeGeometry::Disk { to_world, to_object: to_world.inverse(), normal: Vec3::Z, area: 4.0 * PI },
+            material: 0,
+            emitter: None,
+            flip_normals: false,
+            face_normals: false,
+            name: "d".into(),
+        }];
+        let accel = Accel::build(&shapes);
+        let ray = Ray::new(Vec3::new(0.0, 1.0, 1.0), -Vec3::Z);
+        let si = interaction(&shapes, &ray, &accel.intersect(&shapes, &ray).unwrap());
+        assert!((si.uv - Vec2::new(0.5, 0.25)).length() < 1e-5, "{:?}", si.uv);
+        let outside = Ray::new(Vec3::new(1.5, 1.5, 1.0), -Vec3::Z);
+        assert!(accel.intersect(&shapes, &outside).is_none());
+    }
+}

@@ -1,0 +1,237 @@
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling,
+//! following the semantics of Mitsuba 3's `path` integrator (`max_depth`, `rr_depth`).
+//!
+//! The image is split into tiles rendered in parallel by rayon. Every camera sample draws from
+//! its own random stream keyed by (seed, pixel, sample index), and every pixel is the plain mean
+//! of its own samples, so the image is bit-identical whatever the number of threads.
+
+use crate::camera::CameraRay;
+use crate::film::Image;
+use crate::geometry::{interaction, Ray, SurfaceInteraction};
+use crate::math::{max_component, Spectrum};
+use crate::sampling::Rng;
+use crate::scene::Scene;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Side of the square image tiles handed to threads.
+pub const TILE: u32 = 16;
+
+/// Counts gathered while rendering.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderCounts {
+    /// Camera samples taken.
+    pub samples: u64,
+    /// Rays traced for closest hits (camera and bounce rays).
+    pub rays: u64,
+    /// Shadow rays traced for next-event estimation.
+    pub shadow_rays: u64,
+    /// Samples whose radiance was NaN or infinite and were discarded.
+    pub nonfinite_samples: u64,
+}
+
+impl RenderCounts {
+    fn add(&mut self, o: &RenderCounts) {
+        self.samples += o.samples;
+        self.rays += o.rays;
+        self.shadow_rays += o.shadow_rays;
+        self.nonfinite_samples += o.nonfinite_samples;
+    }
+}
+
+/// What a render produced.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// The image (linear RGB).
+    pub image: Image,
+    /// Counters.
+    pub counts: RenderCounts,
+    /// Wall-clock time of the rendering phase.
+    pub time: Duration,
+}
+
+/// Rendering parameters that the command line may override.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderSettings {
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Seed of all random streams.
+    pub seed: u64,
+}
+
+/// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
+pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
+    let start = Instant::now();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let tiles_x = w.div_ceil(TILE);
+    let tiles_y = h.div_ceil(TILE);
+    let tiles: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
+    let results: Vec<(Vec<Spectrum>, RenderCounts)> = tiles
+        .par_iter()
+        .map(|&(tx, ty)| {
+            let (x0, y0) = (tx * TILE, ty * TILE);
+            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+            let mut counts = RenderCounts::default();
+            let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    px.push(render_pixel(scene, settings, x, y, &mut counts));
+                }
+            }
+            progress(px.len() as u64);
+            (px, counts)
+        })
+        .collect();
+    let mut image = Image::new(w, h);
+    let mut counts = RenderCounts::default();
+    for (&(tx, ty), (px, c)) in tiles.iter().zip(&results) {
+        counts.add(c);
+        let (x0, y0) = (tx * TILE, ty * TILE);
+        let tw = (x0 + TILE).min(w) - x0;
+        for (i, p) in px.iter().enumerate() {
+            let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
+            image.pixels[(y * w + x) as usize] = *p;
+        }
+    }
+    RenderOutput { image, counts, time: start.elapsed() }
+}
+
+/// Mean radiance of one pixel over `settings.spp` samples.
+pub fn render_pixel(scene: &Scene, settings: RenderSettings, x: u32, y: u32, counts: &mut RenderCounts) -> Spectrum {
+    let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
+    let mut sum = Spectrum::ZERO;
+    for s in 0..settings.spp {
+        let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
+        let offset = scene.rfilter.sample(|| rng.next_f32());
+        let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
+        let cam = scene.camera.generate_ray(film);
+        let l = radiance(scene, &cam, &mut rng, counts);
+        counts.samples += 1;
+        if l.is_finite() {
+            sum += l;
+        } else {
+            counts.nonfinite_samples += 1;
+        }
+    }
+    sum / settings.spp.max(1) as f32
+}
+
+/// Offsets a ray origin off the surface along the geometric normal, on the side of `d`.
+#[inline]
+pub fn spawn_ray(si: &SurfaceInteraction, d: Vec3) -> Ray {
+    let eps = ray_epsilon(si.p);
+    let side = if si.ng.dot(d) >= 0.0 { 1.0 } else { -1.0 };
+    Ray { o: si.p + si.ng * (eps * side), d, tmin: 0.0, tmax: f32::INFINITY }
+}
+
+#[inline]
+fn ray_epsilon(p: Vec3) -> f32 {
+    2e-4 * (1.0 + p.abs().max_element())
+}
+
+/// Power heuristic with exponent 2.
+#[inline]
+fn mis(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a > 0.0 && (a2 + b2).is_finite() {
+        a2 / (a2 + b2)
+    } else if a > 0.0 {
+        // Overflowing squares: fall back to the balance heuristic.
+        a / (a + b)
+    } else {
+        0.0
+    }
+}
+
+/// Incident radiance along a camera ray (Mitsuba's `path` integrator).
+pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut RenderCounts) -> Spectrum {
+    let settings = scene.integrator;
+    let n_emitters = scene.emitters.len();
+    let select_pdf = if n_emitters > 0 { 1.0 / n_emitters as f32 } else { 0.0 };
+    let mut ray = cam.ray;
+    let mut throughput = Spectrum::ONE;
+    let mut result = Spectrum::ZERO;
+    let mut eta = 1.0f32;
+    let mut depth = 0u32;
+    // Where the previous BSDF sample came from, for MIS on emitters hit by chance.
+    let mut prev_p = ray.o;
+    let mut prev_pdf = 0.0f32;
+    let mut prev_delta = true;
+    loop {
+        counts.rays += 1;
+        let hit = scene.accel.intersect(&scene.shapes, &ray);
+        let Some(hit) = hit else {
+            for &ei in &scene.infinite {
+                let e = &scene.emitters[ei as usize];
+                let le = e.eval_escape(ray.d);
+                let w = if prev_delta { 1.0 } else { mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, Vec3::ZERO, Vec3::ZERO, ray.d)) };
+                result += throughput * le * w;
+            }
+            break;
+        };
+        let si = interaction(&scene.shapes, &ray, &hit);
+        let shape = &scene.shapes[si.shape as usize];
+        if let Some(ei) = shape.emitter {
+            let e = &scene.emitters[ei as usize];
+            if let crate::emitter::Emitter::Area { radiance, .. } = e {
+                if si.sh.n.dot(-ray.d) > 0.0 {
+                    let w = if prev_delta { 1.0 } else { mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, si.p, si.sh.n, ray.d)) };
+                    result += throughput * *radiance * w;
+                }
+            }
+        }
+        if depth + 1 >= settings.max_depth {
+            break;
+        }
+        let bsdf = scene.materials[shape.material as usize].at(si.uv);
+        let wi = si.sh.to_local(-ray.d);
+
+        // Next-event estimation.
+        if n_emitters > 0 && bsdf.has_smooth() {
+            let pick = ((rng.next_f32() * n_emitters as f32) as usize).min(n_emitters - 1);
+            let u = rng.next_2d();
+            let e = &scene.emitters[pick];
+            if let Some(es) = e.sample(&scene.shapes, si.p, u) {
+                let wo = si.sh.to_local(es.wi);
+                let f = bsdf.eval(wi, wo);
+                if es.pdf > 0.0 && max_component(f) > 0.0 && max_component(es.value) > 0.0 {
+                    let mut shadow = spawn_ray(&si, es.wi);
+                    if es.dist.is_finite() {
+                        shadow.tmax = es.dist - ray_epsilon(si.p + es.wi * es.dist) - (shadow.o - si.p).length();
+                    }
+                    counts.shadow_rays += 1;
+                    if shadow.tmax > 0.0 && !scene.accel.occluded(&scene.shapes, &shadow) {
+                        let light_pdf = select_pdf * es.pdf;
+                        let w = if es.delta { 1.0 } else { mis(light_pdf, bsdf.pdf(wi, wo)) };
+                        result += throughput * f * es.value * (w / light_pdf);
+                    }
+                }
+            }
+        }
+
+        // Continue the path by sampling the BSDF.
+        let u_lobe = rng.next_f32();
+        let u = rng.next_2d();
+        let Some(bs) = bsdf.sample(wi, u_lobe, u) else { break };
+        if !(bs.pdf > 0.0) || !bs.weight.is_finite() || max_component(bs.weight) <= 0.0 {
+            break;
+        }
+        throughput *= bs.weight;
+        eta *= bs.eta;
+        prev_p = si.p;
+        prev_pdf = bs.pdf;
+        prev_delta = matches!(bs.kind, crate::bsdf::LobeKind::Specular);
+        ray = spawn_ray(&si, si.sh.to_world(bs.wo));
+        depth += 1;
+
+        if depth >= settings.rr_depth {
+            let q = (max_component(throughput) * eta * eta).min(0.95);
+            if !(rng.next_f32() < q) {
+                break;
+            }
+            throughput /= q;
+        }
+    }
+    result
+}

@@ -1,0 +1,633 @@
+//! Builds a [`Scene`] from a Mitsuba 3 XML document.
+//!
+//! The XML reader ([`crate::xml`]) gives typed, located parameters; this module knows the
+//! plugins. Every plugin reads its parameters by name and then asks the reader whether anything
+//! was left unused, so a misspelt parameter is an error at its line, as in Mitsuba.
+
+use crate::bsdf::{conductor_preset, BsdfDesc, MicrofacetKind};
+use crate::camera::{Camera, FovAxis, Rfilter};
+use crate::emitter::{EnvMap, Emitter};
+use crate::error::Result;
+use crate::geometry::{mesh_area_distribution, Accel, Shape, ShapeGeometry};
+use crate::mesh::TriangleMesh;
+use crate::scene::{PathSettings, Scene};
+use crate::texture::{Bitmap, Texture, WrapMode};
+use crate::xml::{self, Object};
+use glam::{Affine2, Affine3A, Mat3, Mat4, Vec2, Vec3};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+use std::sync::Arc;
+
+/// Largest image accepted, in pixels (a 16k × 16k image).
+pub const MAX_PIXELS: u64 = 1 << 28;
+
+/// Loads a scene file; `defines` override its `<default>` values.
+pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
+    let root = xml::parse_file(path, defines)?;
+    let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    Builder::new(base).build(&root)
+}
+
+/// Loads a scene from text; relative file names resolve against `base_dir`.
+pub fn load_str(text: &str, virtual_path: &Path, base_dir: &Path, defines: &[(String, String)]) -> Result<Scene> {
+    let root = xml::parse_str(text, virtual_path, defines)?;
+    Builder::new(base_dir.to_path_buf()).build(&root)
+}
+
+struct Builder {
+    base: PathBuf,
+    shapes: Vec<Shape>,
+    materials: Vec<BsdfDesc>,
+    /// Materials already built, keyed by the address of their XML object (shared `<ref>`s).
+    material_ids: HashMap<*const Object, u32>,
+    emitters: Vec<Emitter>,
+    bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
+}
+
+fn mat4_to_affine(m: Mat4) -> Affine3A {
+    Affine3A::from_mat4(m)
+}
+
+/// The uv transform of a `to_uv` (the 2D affine part of the 4×4 matrix).
+fn to_uv_affine(m: Mat4) -> Affine2 {
+    Affine2::from_cols_array(&[m.x_axis.x, m.x_axis.y, m.y_axis.x, m.y_axis.y, m.w_axis.x, m.w_axis.y])
+}
+
+fn check_finite_positive(obj: &Object, name: &str, v: f32, allow_zero: bool) -> Result<f32> {
+    if !v.is_finite() || v < 0.0 || (!allow_zero && v == 0.0) {
+        return Err(obj.error(format!(
+            "parameter '{name}' must be a finite {} number, got {v}",
+            if allow_zero { "non-negative" } else { "positive" }
+        )));
+    }
+    Ok(v)
+}
+
+fn check_rgb(obj: &Object, name: &str, v: Vec3) -> Result<Vec3> {
+    if !v.is_finite() || v.min_element() < 0.0 {
+        return Err(obj.error(format!("parameter '{name}' must be finite and non-negative, got {v}")));
+    }
+    Ok(v)
+}
+
+impl Builder {
+    fn new(base: PathBuf) -> Self {
+        Builder {
+            base,
+            shapes: Vec::new(),
+            materials: Vec::new(),
+            material_ids: HashMap::new(),
+            emitters: Vec::new(),
+            bitmaps: HashMap::new(),
+        }
+    }
+
+    fn resolve(&self, file: &str) -> PathBuf {
+        let p = Path::new(file);
+        if p.is_absolute() {
+            p.to_path_buf()
+        } else {
+            self.base.join(p)
+        }
+    }
+
+    fn build(mut self, root: &Object) -> Result<Scene> {
+        let sensors = root.children("sensor");
+        let sensor = match sensors.as_slice() {
+            [s] => s.clone(),
+            [] => return Err(root.error("the scene has no <sensor>; add a perspective sensor")),
+            [_, s, ..] => return Err(s.error("only one <sensor> per scene is supported")),
+        };
+        let (camera, rfilter, spp, seed) = self.sensor(&sensor)?;
+        let integrator = match root.children("integrator").as_slice() {
+            [] => PathSettings { max_depth: u32::MAX, rr_depth: 5 },
+            [i] => self.integrator(i)?,
+            [_, i, ..] => return Err(i.error("only one <integrator> per scene is supported")),
+        };
+        for shape in root.children("shape") {
+            self.shape(&shape)?;
+        }
+        for emitter in root.children("emitter") {
+            let e = self.emitter(&emitter)?;
+            self.emitters.push(e);
+        }
+        for bsdf in root.children("bsdf") {
+            // Declared at top level for later <ref>s: validate it even if nothing uses it.
+            self.material(&bsdf)?;
+        }
+        for tex in root.children("texture") {
+            self.texture(&tex)?;
+        }
+        root.check_unused()?;
+        if self.shapes.iter().all(|s| s.emitter.is_none()) && self.emitters.is_empty() {
+            // Mitsuba renders black without lights; so do we, but say so.
+            eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
+        }
+        let accel = Accel::build(&self.shapes);
+        let infinite = self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();
+        Ok(Scene {
+            shapes: self.shapes,
+            accel,
+            materials: self.materials,
+            emitters: self.emitters,
+            infinite,
+            camera,
+            rfilter,
+            integrator,
+            spp,
+            seed,
+        })
+    }
+
+    fn integrator(&mut self, obj: &Object) -> Result<PathSettings> {
+        if obj.plugin != "path" {
+            return Err(obj.error(format!("unknown integrator '{}' (supported: path)", obj.plugin)));
+        }
+        let max_depth = obj.int("max_depth", -1)?;
+        let rr_depth = obj.int("rr_depth", 5)?;
+        if max_depth < -1 || max_depth == 0 {
+            return Err(obj.error(format!("max_depth must be -1 (unbounded) or at least 1, got {max_depth}")));
+        }
+        if rr_depth < 1 {
+            return Err(obj.error(format!("rr_depth must be at least 1, got {rr_depth}")));
+        }
+        if obj.bool("hide_emitters", false)? {
+            return Err(obj.error("hide_emitters=true is not supported"));
+        }
+        obj.check_unused()?;
+        Ok(PathSettings {
+            max_depth: if max_depth < 0 { u32::MAX } else { max_depth.min(u32::MAX as i64) as u32 },
+            rr_depth: rr_depth.min(u32::MAX as i64) as u32,
+        })
+    }
+
+    fn sensor(&mut self, obj: &Object) -> Result<(Camera, Rfilter, u32, u64)> {
+        if obj.plugin != "perspective" {
+            return Err(obj.error(format!("unknown sensor '{}' (supported: perspective)", obj.plugin)));
+        }
+        let fov = match (obj.opt_float("fov")?, obj.opt_string("focal_length")?) {
+            (Some(f), None) => f,
+            (None, Some(fl)) => {
+                let mm: f32 = fl.trim_end_matches("mm").trim().parse().map_err(|_| {
+                    obj.error(format!("focal_length must be like '50mm', got '{fl}'"))
+                })?;
+                2.0 * (36.0f32 / (2.0 * mm)).atan().to_degrees()
+            }
+            (None, None) => 2.0 * (36.0f32 / 100.0).atan().to_degrees(),
+            (Some(_), Some(_)) => return Err(obj.error("give either fov or focal_length, not both")),
+        };
+        if !(fov > 0.0 && fov < 180.0) {
+            return Err(obj.error(format!("fov must be in (0, 180) degrees, got {fov}")));
+        }
+        let axis = match obj.string("fov_axis", "x")?.as_str() {
+            "x" => FovAxis::X,
+            "y" => FovAxis::Y,
+            "diagonal" => FovAxis::Diagonal,
+            "smaller" => FovAxis::Smaller,
+            "larger" => FovAxis::Larger,
+            other => return Err(obj.error(format!("fov_axis must be x, y, diagonal, smaller or larger, got '{other}'"))),
+        };
+        let near = obj.float("near_clip", 1e-2)?;
+        let far = obj.float("far_clip", 1e4)?;
+        if !(near > 0.0 && far > near && far.is_finite()) {
+            return Err(obj.error(format!("need 0 < near_clip < far_clip, got {near} and {far}")));
+        }
+        let to_world = obj.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        let (mut width, mut height, mut rfilter) = (768u32, 576u32, Rfilter::Gaussian { stddev: 0.5 });
+        match obj.children("film").as_slice() {
+            [] => {}
+            [film] => (width, height, rfilter) = self.film(film)?,
+            [_, f, ..] => return Err(f.error("only one <film> per sensor")),
+        }
+        let (mut spp, mut seed) = (4u32, 0u64);
+        match obj.children("sampler").as_slice() {
+            [] => {}
+            [s] => (spp, seed) = self.sampler(s)?,
+            [_, s, ..] => return Err(s.error("only one <sampler> per sensor")),
+        }
+        obj.check_unused()?;
+        let camera = Camera::new(mat4_to_affine(to_world), fov, axis, width, height, near, far);
+        Ok((camera, rfilter, spp, seed))
+    }
+
+    fn film(&mut self, obj: &Object) -> Result<(u32, u32, Rfilter)> {
+        if obj.plugin != "hdrfilm" {
+            return Err(obj.error(format!("unknown film '{}' (supported: hdrfilm)", obj.plugin)));
+        }
+        let width = obj.int("width", 768)?;
+        let height = obj.int("height", 576)?;
+        if width < 1 || height < 1 {
+            return Err(obj.error(format!("film size must be at least 1×1, got {width}×{height}")));
+        }
+        if (width as u64).saturating_mul(height as u64) > MAX_PIXELS {
+            return Err(obj.error(format!("film size {width}×{height} exceeds the limit of {MAX_PIXELS} pixels")));
+        }
+        // Output format parameters are accepted: tessera picks the format from --out.
+        for name in ["pixel_format", "component_format", "file_format"] {
+            let _ = obj.opt_string(name)?;
+        }
+        let _ = obj.bool("banner", false)?;
+        let rfilter = match obj.children("rfilter").as_slice() {
+            [] => Rfilter::Gaussian { stddev: 0.5 },
+            [f] => {
+                let r = match f.plugin.as_str() {
+                    "box" => Rfilter::Box,
+                    "gaussian" => Rfilter::Gaussian { stddev: check_finite_positive(f, "stddev", f.float("stddev", 0.5)?, false)? },
+                    "tent" => Rfilter::Tent { radius: check_finite_positive(f, "radius", f.float("radius", 1.0)?, false)? },
+                    other => return Err(f.error(format!("unknown rfilter '{other}' (supported: box, gaussian, tent)"))),
+                };
+                f.check_unused()?;
+                r
+            }
+            [_, f, ..] => return Err(f.error("only one <rfilter> per film")),
+        };
+        obj.check_unused()?;
+        Ok((width as u32, height as u32, rfilter))
+    }
+
+    fn sampler(&mut self, obj: &Object) -> Result<(u32, u64)> {
+        match obj.plugin.as_str() {
+            "independent" => {}
+            "stratified" | "multijitter" | "orthogonal" | "ldsampler" => {
+                eprintln!("warning: {}: sampler '{}' is rendered with independent samples", obj.loc, obj.plugin);
+                let _ = obj.bool("jitter", true)?;
+                let _ = obj.int("strength", 2)?;
+            }
+            other => return Err(obj.error(format!("unknown sampler '{other}' (supported: independent)"))),
+        }
+        let spp = obj.int("sample_count", 4)?;
+        let seed = obj.int("seed", 0)?;
+        if !(1..=1 << 24).contains(&spp) {
+            return Err(obj.error(format!("sample_count must be between 1 and {}, got {spp}", 1 << 24)));
+        }
+        if seed < 0 {
+            return Err(obj.error(format!("seed must be non-negative, got {seed}")));
+        }
+        obj.check_unused()?;
+        Ok((spp as u32, seed as u64))
+    }
+
+    fn bitmap(&mut self, obj: &Object, file: &str, raw: bool) -> Result<Arc<Bitmap>> {
+        let path = self.resolve(file);
+        if let Some(b) = self.bitmaps.get(&(path.clone(), raw)) {
+            return Ok(b.clone());
+        }
+        if !path.exists() {
+            return Err(obj.error(format!("image file '{}' not found", path.display())));
+        }
+        let b = Arc::new(Bitmap::load(&path, raw)?);
+        self.bitmaps.insert((path, raw), b.clone());
+        Ok(b)
+    }
+
+    /// A texture object (`bitmap`, `checkerboard`).
+    fn texture(&mut self, obj: &Object) -> Result<Texture> {
+        let to_uv = obj.transform("to_uv")?.map(to_uv_affine).unwrap_or(Affine2::IDENTITY);
+        let tex = match obj.plugin.as_str() {
+            "bitmap" => {
+                let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("bitmap needs a 'filename'"))?;
+                let raw = obj.bool("raw", false)?;
+                let wrap = match obj.string("wrap_mode", "repeat")?.as_str() {
+                    "repeat" => WrapMode::Repeat,
+                    "mirror" => WrapMode::Mirror,
+                    "clamp" => WrapMode::Clamp,
+                    other => return Err(obj.error(format!("wrap_mode must be repeat, mirror or clamp, got '{other}'"))),
+                };
+                let filter = obj.string("filter_type", "bilinear")?;
+                if filter != "bilinear" {
+                    return Err(obj.error(format!("filter_type '{filter}' is not supported (supported: bilinear)")));
+                }
+                Texture::Bitmap { image: self.bitmap(obj, &file, raw)?, to_uv, wrap }
+            }
+            "checkerboard" => Texture::Checkerboard {
+                color0: check_rgb(obj, "color0", obj.rgb("color0", Vec3::splat(0.4))?)?,
+                color1: check_rgb(obj, "color1", obj.rgb("color1", Vec3::splat(0.2))?)?,
+                to_uv,
+            },
+            other => return Err(obj.error(format!("unknown texture '{other}' (supported: bitmap, checkerboard)"))),
+        };
+        obj.check_unused()?;
+        Ok(tex)
+    }
+
+    /// A colour or float parameter that may also be a nested texture.
+    fn texture_param(&mut self, obj: &Object, name: &str, default: Vec3) -> Result<Texture> {
+        if let Some(child) = obj.child_named(name) {
+            if child.tag != "texture" {
+                return Err(child.error(format!("parameter '{name}' must be a colour, a float or a <texture>, found <{}>", child.tag)));
+            }
+            return self.texture(&child);
+        }
+        Ok(Texture::Constant(check_rgb(obj, name, obj.rgb(name, default)?)?))
+    }
+
+    fn ior(&mut self, obj: &Object, name: &str, default: f32) -> Result<f32> {
+        let v = match obj.opt_float(name) {
+            Ok(Some(v)) => v,
+            Ok(None) => default,
+            Err(_) => {
+                let s = obj.string(name, "")?;
+                crate::bsdf::dielectric_ior_preset(&s).ok_or_else(|| obj.error(format!("unknown material '{s}' for '{name}' (give a number or a name such as bk7, water, air)")))?
+            }
+        };
+        check_finite_positive(obj, name, v, false)
+    }
+
+    /// Roughness parameters shared by `roughconductor` and `roughdielectric`.
+    fn microfacet(&mut self, obj: &Object) -> Result<(MicrofacetKind, f32, f32)> {
+        let kind = match obj.string("distribution", "beckmann")?.as_str() {
+            "beckmann" => MicrofacetKind::Beckmann,
+            "ggx" => MicrofacetKind::Ggx,
+            other => return Err(obj.error_at("distribution", format!("distribution must be beckmann or ggx, got '{other}'"))),
+        };
+        let _ = obj.bool("sample_visible", true)?;
+        let (au, av) = if obj.has("alpha_u") || obj.has("alpha_v") {
+            if obj.has("alpha") {
+                return Err(obj.error("give either alpha or alpha_u/alpha_v, not both"));
+            }
+            (obj.float("alpha_u", 0.1)?, obj.float("alpha_v", 0.1)?)
+        } else {
+            let a = obj.float("alpha", 0.1)?;
+            (a, a)
+        };
+        for (name, a) in [("alpha", au), ("alpha_v", av)] {
+            if !(a.is_finite() && a > 0.0) {
+                return Err(obj.error_at(if obj.has(name) { name } else { "alpha_u" }, format!("roughness alpha must be a finite positive number, got {a}")));
+            }
+        }
+        Ok((kind, au.max(1e-4), av.max(1e-4)))
+    }
+
+    fn conductor_ior(&mut self, obj: &Object) -> Result<(Vec3, Vec3)> {
+        let has_explicit = obj.has("eta") || obj.has("k");
+        let (eta, k) = if has_explicit {
+            if obj.has("material") {
+                return Err(obj.error("give either material or eta/k, not both"));
+            }
+            (obj.rgb("eta", Vec3::ZERO)?, obj.rgb("k", Vec3::ONE)?)
+        } else {
+            let m = obj.string("material", "none")?;
+            conductor_preset(&m).ok_or_else(|| {
+                obj.error_at("material", format!("unknown conductor material '{m}' (supported: none, Au, Ag, Cu, Al)"))
+            })?
+        };
+        let ext = check_finite_positive(obj, "ext_eta", obj.float("ext_eta", 1.0)?, false)?;
+        Ok((check_rgb(obj, "eta", eta)? / ext, check_rgb(obj, "k", k)? / ext))
+    }
+
+    fn dielectric_eta(&mut self, obj: &Object) -> Result<f32> {
+        let int_ior = self.ior(obj, "int_ior", crate::bsdf::DEFAULT_INT_IOR)?;
+        let ext_ior = self.ior(obj, "ext_ior", crate::bsdf::DEFAULT_EXT_IOR)?;
+        if (int_ior - ext_ior).abs() < 1e-6 {
+            return Err(obj.error("int_ior and ext_ior must differ (an index-matched interface is invisible)"));
+        }
+        Ok(int_ior / ext_ior)
+    }
+
+    fn bsdf(&mut self, obj: &Object) -> Result<BsdfDesc> {
+        let desc = match obj.plugin.as_str() {
+            "diffuse" => BsdfDesc::Diffuse { reflectance: self.texture_param(obj, "reflectance", Vec3::splat(0.5))? },
+            "conductor" => {
+                let (eta, k) = self.conductor_ior(obj)?;
+                BsdfDesc::Conductor { eta, k, specular_reflectance: self.texture_param(obj, "specular_reflectance", Vec3::ONE)? }
+            }
+            "roughconductor" => {
+                let (eta, k) = self.conductor_ior(obj)?;
+                let (distribution, alpha_u, alpha_v) = self.microfacet(obj)?;
+                BsdfDesc::RoughConductor {
+                    eta,
+                    k,
+                    specular_reflectance: self.texture_param(obj, "specular_reflectance", Vec3::ONE)?,
+                    distribution,
+                    alpha_u,
+                    alpha_v,
+                }
+            }
+            "dielectric" => BsdfDesc::Dielectric {
+                eta: self.dielectric_eta(obj)?,
+                specular_reflectance: self.texture_param(obj, "specular_reflectance", Vec3::ONE)?,
+                specular_transmittance: self.texture_param(obj, "specular_transmittance", Vec3::ONE)?,
+            },
+            "roughdielectric" => {
+                let eta = self.dielectric_eta(obj)?;
+                let (distribution, alpha_u, alpha_v) = self.microfacet(obj)?;
+                BsdfDesc::RoughDielectric {
+                    eta,
+                    specular_reflectance: self.texture_param(obj, "specular_reflectance", Vec3::ONE)?,
+                    specular_transmittance: self.texture_param(obj, "specular_transmittance", Vec3::ONE)?,
+                    distribution,
+                    alpha_u,
+                    alpha_v,
+                }
+            }
+            "twosided" => {
+                let inner = obj.children("bsdf");
+                match inner.as_slice() {
+                    [b] => {
+                        if b.plugin == "twosided" {
+                            return Err(b.error("twosided cannot nest another twosided"));
+                        }
+                        BsdfDesc::TwoSided(Box::new(self.bsdf(b)?))
+                    }
+                    [] => return Err(obj.error("twosided needs one nested <bsdf>")),
+                    _ => return Err(obj.error("twosided with a different BSDF on each side is not supported; give one nested <bsdf>")),
+                }
+            }
+            other => {
+                return Err(obj.error(format!(
+                    "unknown bsdf '{other}' (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided)"
+                )))
+            }
+        };
+        obj.check_unused()?;
+        Ok(desc)
+    }
+
+    fn material(&mut self, obj: &Rc<Object>) -> Result<u32> {
+        let key = Rc::as_ptr(obj);
+        if let Some(&i) = self.material_ids.get(&key) {
+            return Ok(i);
+        }
+        let desc = self.bsdf(obj)?;
+        let i = self.materials.len() as u32;
+        self.materials.push(desc);
+        self.material_ids.insert(key, i);
+        Ok(i)
+    }
+
+    fn shape(&mut self, obj: &Object) -> Result<()> {
+        let to_world = obj.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+        if to_world.determinant().abs() < 1e-12 || !to_world.is_finite() {
+            return Err(obj.error("to_world is singular or not finite"));
+        }
+        let flip_normals = obj.bool("flip_normals", false)?;
+        let name = obj.id.clone().unwrap_or_else(|| obj.plugin.clone());
+        let mut face_normals = false;
+        let geometry = match obj.plugin.as_str() {
+            "rectangle" => mesh_geometry(obj, rectangle_mesh(), to_world)?,
+            "cube" => mesh_geometry(obj, cube_mesh(), to_world)?,
+            "obj" | "ply" => {
+                let file = obj.opt_string("filename")?.ok_or_else(|| obj.error(format!("{} needs a 'filename'", obj.plugin)))?;
+                let path = self.resolve(&file);
+                if !path.exists() {
+                    return Err(obj.error(format!("mesh file '{}' not found", path.display())));
+                }
+                face_normals = obj.bool("face_normals", false)?;
+                let mut mesh = if obj.plugin == "obj" {
+                    crate::mesh::load_obj(&path, obj.bool("flip_tex_coords", true)?)?
+                } else {
+                    crate::mesh::load_ply(&path, obj.bool("flip_tex_coords", false)?)?
+                };
+                for w in mesh.validate(&path)? {
+                    eprintln!("warning: {w}");
+                }
+                mesh_geometry(obj, mesh, to_world)?
+            }
+            "sphere" => {
+                let center = obj.point("center", Vec3::ZERO)?;
+                let radius = obj.float("radius", 1.0)?;
+                check_finite_positive(obj, "radius", radius, false)?;
+                if !center.is_finite() {
+                    return Err(obj.error("sphere center must be finite"));
+                }
+                // The transform's linear part must be a similarity (uniform scale).
+                let lin = Mat3::from_mat4(to_world);
+                let scales = Vec3::new(lin.x_axis.length(), lin.y_axis.length(), lin.z_axis.length());
+                if (scales.max_element() - scales.min_element()) > 1e-3 * scales.max_element() {
+                    return Err(obj.error("sphere to_world must scale uniformly (got a non-uniform scale)"));
+                }
+                let s = scales.x;
+                let rotation = Mat3::from_cols(lin.x_axis / s, lin.y_axis / s, lin.z_axis / s);
+                let rotation = if rotation.determinant() < 0.0 { -rotation } else { rotation };
+                ShapeGeometry::Sphere { center: to_world.transform_point3(center), radius: radius * s, rotation }
+            }
+            "disk" => {
+                let tw = mat4_to_affine(to_world);
+                let lin = Mat3::from(tw.matrix3);
+                let normal = (lin.inverse().transpose() * Vec3::Z).normalize();
+                let area = std::f32::consts::PI * lin.x_axis.cross(lin.y_axis).length();
+                ShapeGeometry::Disk { to_world: tw, to_object: tw.inverse(), normal, area }
+            }
+            other => {
+                return Err(obj.error(format!("unknown shape '{other}' (supported: rectangle, disk, cube, sphere, obj, ply)")))
+            }
+        };
+        let material = match obj.children("bsdf").as_slice() {
+            [] => self.default_material(),
+            [b] => self.material(b)?,
+            [_, b, ..] => return Err(b.error("a shape takes one <bsdf>")),
+        };
+        let shape_index = self.shapes.len() as u32;
+        let emitter = match obj.children("emitter").as_slice() {
+            [] => None,
+            [e] => {
+                if e.plugin != "area" {
+                    return Err(e.error(format!("a shape's emitter must be 'area', got '{}'", e.plugin)));
+                }
+                let radiance = check_rgb(e, "radiance", e.rgb("radiance", Vec3::ONE)?)?;
+                e.check_unused()?;
+                self.emitters.push(Emitter::Area { shape: shape_index, radiance });
+                Some(self.emitters.len() as u32 - 1)
+            }
+            [_, e, ..] => return Err(e.error("a shape takes one <emitter>")),
+        };
+        obj.check_unused()?;
+        self.shapes.push(Shape { geometry, material, emitter, flip_normals, face_normals, name });
+        Ok(())
+    }
+
+    fn default_material(&mut self) -> u32 {
+        let i = self.materials.len() as u32;
+        self.materials.push(BsdfDesc::default());
+        i
+    }
+
+    fn emitter(&mut self, obj: &Object) -> Result<Emitter> {
+        let e = match obj.plugin.as_str() {
+            "point" => {
+                let mut position = obj.point("position", Vec3::ZERO)?;
+                if let Some(m) = obj.transform("to_world")? {
+                    position = m.transform_point3(position);
+                }
+                Emitter::Point { position, intensity: check_rgb(obj, "intensity", obj.rgb("intensity", Vec3::ONE)?)? }
+            }
+            "constant" => Emitter::Constant { radiance: check_rgb(obj, "radiance", obj.rgb("radiance", Vec3::ONE)?)? },
+            "envmap" => {
+                let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("envmap needs a 'filename'"))?;
+                let scale = check_finite_positive(obj, "scale", obj.float("scale", 1.0)?, true)?;
+                let to_world = obj.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
+                let lin = Mat3::from_mat4(to_world);
+                let rot = Mat3::from_cols(lin.x_axis.normalize(), lin.y_axis.normalize(), lin.z_axis.normalize());
+                let bitmap = self.bitmap(obj, &file, false)?;
+                let env = EnvMap::new(bitmap, rot, scale).ok_or_else(|| obj.error("envmap image is black everywhere"))?;
+                Emitter::Env(Box::new(env))
+            }
+            "directional" => {
+                let mut direction = obj.vector("direction", Vec3::Z)?;
+                if let Some(m) = obj.transform("to_world")? {
+                    direction = m.transform_vector3(if obj.has("direction") { direction } else { Vec3::Z });
+                }
+                let direction = direction.normalize_or_zero();
+                if direction == Vec3::ZERO || !direction.is_finite() {
+                    return Err(obj.error("directional emitter needs a non-zero direction"));
+                }
+                Emitter::Directional { direction, irradiance: check_rgb(obj, "irradiance", obj.rgb("irradiance", Vec3::ONE)?)? }
+            }
+            "area" => return Err(obj.error("an area emitter must be nested in a <shape>")),
+            other => {
+                return Err(obj.error(format!("unknown emitter '{other}' (supported: area, point, constant, envmap, directional)")))
+            }
+        };
+        obj.check_unused()?;
+        Ok(e)
+    }
+}
+
+/// Transforms a mesh to world space (normals by the inverse transpose) and checks it has area.
+fn mesh_geometry(obj: &Object, mut mesh: TriangleMesh, to_world: Mat4) -> Result<ShapeGeometry> {
+    let normal_m = Mat3::from_mat4(to_world).inverse().transpose();
+    for p in &mut mesh.positions {
+        *p = to_world.transform_point3(*p);
+    }
+    if let Some(ns) = &mut mesh.normals {
+        for n in ns.iter_mut() {
+            *n = (normal_m * *n).normalize_or_zero();
+        }
+    }
+    let area = mesh_area_distribution(&mesh).ok_or_else(|| obj.error("shape has zero surface area"))?;
+    Ok(ShapeGeometry::Mesh { mesh, area })
+}
+
+/// Mitsuba's `rectangle`: [−1, 1]² in the xy plane, normal +z, uv = ((x+1)/2, (y+1)/2).
+pub fn rectangle_mesh() -> TriangleMesh {
+    TriangleMesh {
+        positions: vec![Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(-1.0, 1.0, 0.0)],
+        normals: None,
+        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+    }
+}
+
+/// Mitsuba's `cube`: [−1, 1]³ with flat faces, outward normals.
+pub fn cube_mesh() -> TriangleMesh {
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
+            // Two tangents so that t1 × t2 = n.
+            let t1 = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
+            let t2 = n.cross(t1);
+            let base = positions.len() as u32;
+            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                positions.push(n + t1 * a + t2 * b);
+                uvs.push(Vec2::new((a + 1.0) * 0.5, (b + 1.0) * 0.5));
+            }
+            indices.push([base, base + 1, base + 2]);
+            indices.push([base, base + 2, base + 3]);
+        }
+    }
+    TriangleMesh { positions, normals: None, uvs: Some(uvs), indices }
+}

@@ -1,0 +1,40 @@
+//! A loaded scene: shapes and their BVH, materials, emitters, camera, film and integrator
+//! settings.
+
+use crate::bsdf::BsdfDesc;
+use crate::camera::{Camera, Rfilter};
+use crate::emitter::Emitter;
+use crate::geometry::{Accel, Shape};
+
+/// Settings of Mitsuba's `path` integrator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PathSettings {
+    /// Longest path in segments (`u32::MAX` for Mitsuba's −1); 1 shows only emitters.
+    pub max_depth: u32,
+    /// Depth from which Russian roulette starts.
+    pub rr_depth: u32,
+}
+
+/// Everything needed to render.
+pub struct Scene {
+    /// Shapes (world space).
+    pub shapes: Vec<Shape>,
+    /// BVH over the shapes.
+    pub accel: Accel,
+    /// Materials; shapes refer to them by index.
+    pub materials: Vec<BsdfDesc>,
+    /// Emitters; area emitters refer to their shape.
+    pub emitters: Vec<Emitter>,
+    /// Indices of emitters at infinity (constant, envmap).
+    pub infinite: Vec<u32>,
+    /// The sensor.
+    pub camera: Camera,
+    /// Pixel reconstruction filter.
+    pub rfilter: Rfilter,
+    /// Integrator settings.
+    pub integrator: PathSettings,
+    /// Sample count the scene asks for.
+    pub spp: u32,
+    /// Seed the scene's sampler asks for.
+    pub seed: u64,
+}

@@ -1,0 +1,128 @@
+//! Bad scenes get clear errors naming the file and line, never a panic.
+
+use std::path::PathBuf;
+
+fn dir() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("tessera-bad-input-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+const SENSOR: &str = r#"<sensor type="perspective"><float name="fov" value="40"/>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="8"/></film></sensor>"#;
+
+/// Loads `body` (placed inside a scene after a valid sensor, from line 3 on) and returns the error.
+fn load_err(name: &str, body: &str) -> String {
+    let path = dir().join(format!("{name}.xml"));
+    std::fs::write(&path, format!("<scene version=\"3.0.0\">\n{SENSOR}\n{body}\n</scene>\n")).unwrap();
+    match render::loader::load_file(&path, &[]) {
+        Ok(_) => panic!("{name}: expected an error"),
+        Err(e) => e.to_string(),
+    }
+}
+
+fn assert_mentions(err: &str, needles: &[&str]) {
+    for n in needles {
+        assert!(err.contains(n), "error '{err}' lacks '{n}'");
+    }
+}
+
+#[test]
+fn malformed_xml() {
+    let path = dir().join("malformed.xml");
+    std::fs::write(&path, "<scene version=\"3.0.0\">\n<shape type=\"sphere\">\n</scene>").unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    assert_mentions(&e, &["malformed.xml:"]);
+}
+
+#[test]
+fn unknown_plugins() {
+    assert_mentions(&load_err("unknown_shape", r#"<shape type="teapot"/>"#), &["unknown_shape.xml:4", "teapot", "sphere"]);
+    assert_mentions(&load_err("unknown_bsdf", r#"<shape type="sphere"><bsdf type="velvet"/></shape>"#), &["velvet"]);
+    assert_mentions(&load_err("unknown_emitter", r#"<emitter type="spot"/>"#), &["spot"]);
+}
+
+#[test]
+fn unused_and_mistyped_parameters() {
+    assert_mentions(
+        &load_err("unused", r#"<shape type="sphere"><float name="radiuss" value="1"/></shape>"#),
+        &["unused.xml:4", "radiuss"],
+    );
+    assert_mentions(
+        &load_err("mistyped", r#"<shape type="sphere"><string name="radius" value="big"/></shape>"#),
+        &["mistyped.xml:4", "radius"],
+    );
+}
+
+#[test]
+fn missing_files() {
+    assert_mentions(
+        &load_err("missing_mesh", r#"<shape type="obj"><string name="filename" value="nope.obj"/></shape>"#),
+        &["missing_mesh.xml:4", "nope.obj", "not found"],
+    );
+    assert_mentions(
+        &load_err(
+            "missing_image",
+            r#"<shape type="sphere"><bsdf type="diffuse"><texture type="bitmap" name="reflectance"><string name="filename" value="nope.png"/></texture></bsdf></shape>"#,
+        ),
+        &["nope.png", "not found"],
+    );
+}
+
+#[test]
+fn nan_and_negative_parameters() {
+    assert_mentions(&load_err("nan_radius", r#"<shape type="sphere"><float name="radius" value="nan"/></shape>"#), &["nan_radius.xml:4"]);
+    assert_mentions(&load_err("neg_radius", r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#), &["neg_radius.xml:4", "radius"]);
+    assert_mentions(
+        &load_err("neg_reflectance", r#"<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="-0.5"/></bsdf></shape>"#),
+        &["neg_reflectance.xml:4", "reflectance"],
+    );
+    assert_mentions(
+        &load_err("neg_alpha", r#"<shape type="sphere"><bsdf type="roughconductor"><float name="alpha" value="-0.1"/></bsdf></shape>"#),
+        &["neg_alpha.xml:4", "alpha"],
+    );
+}
+
+#[test]
+fn singular_transform() {
+    assert_mentions(
+        &load_err("singular", r#"<shape type="rectangle"><transform name="to_world"><scale x="0"/></transform></shape>"#),
+        &["singular.xml:4"],
+    );
+}
+
+#[test]
+fn degenerate_mesh() {
+    let obj = dir().join("flat.obj");
+    std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
+    let e = load_err("degenerate", &format!(r#"<shape type="obj"><string name="filename" value="{}"/></shape>"#, obj.display()));
+    assert_mentions(&e, &["flat.obj"]);
+}
+
+#[test]
+fn film_sizes() {
+    let path = dir().join("zero_film.xml");
+    std::fs::write(
+        &path,
+        "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><film type=\"hdrfilm\">\n<integer name=\"width\" value=\"0\"/></film></sensor>\n</scene>\n",
+    )
+    .unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    assert_mentions(&e, &["zero_film.xml:2", "film size"]);
+    let path = dir().join("huge_film.xml");
+    std::fs::write(
+        &path,
+        "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><film type=\"hdrfilm\">\n<integer name=\"width\" value=\"100000\"/><integer name=\"height\" value=\"100000\"/></film></sensor>\n</scene>\n",
+    )
+    .unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    assert_mentions(&e, &["huge_film.xml:2", "exceeds"]);
+}
+
+#[test]
+fn missing_sensor() {
+    let path = dir().join("nosensor.xml");
+    std::fs::write(&path, "<scene version=\"3.0.0\">\n<shape type=\"sphere\"/>\n</scene>\n").unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    assert_mentions(&e, &["nosensor.xml:1", "sensor"]);
+}
