@@ -1,0 +1,217 @@
+//! Small 2×2 helpers on [`DMat2`]: a closed-form singular value decomposition, regularised
+//! inverses built on it, and the symmetric eigen-decomposition used to keep covariances
+//! positive semi-definite and bounded.
+//!
+//! glam matrices are column-major: `m.x_axis` is the first column, so the entry in row `r`,
+//! column `c` is `m.col(c)[r]`.
+
+use glam::{DMat2, DVec2};
+
+/// A 2×2 singular value decomposition `M = R(φ) · diag(σ₁, σ₂) · R(θ)`, where `R(a)` is the
+/// counter-clockwise rotation by `a`. `σ₁ ≥ |σ₂|`; `σ₂` carries the sign of `det M`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Svd2 {
+    /// Angle of the left rotation `R(φ)`.
+    pub phi: f64,
+    /// Angle of the right rotation `R(θ)`.
+    pub theta: f64,
+    /// Largest singular value (≥ 0).
+    pub s1: f64,
+    /// Second singular value, signed like the determinant (`|s2| ≤ s1`).
+    pub s2: f64,
+}
+
+impl Svd2 {
+    /// Decomposes `m` in closed form (no iteration, no division; finite for finite input).
+    pub fn new(m: DMat2) -> Self {
+        let (m00, m10, m01, m11) = (m.x_axis.x, m.x_axis.y, m.y_axis.x, m.y_axis.y);
+        let e = 0.5 * (m00 + m11);
+        let f = 0.5 * (m00 - m11);
+        let g = 0.5 * (m10 + m01);
+        let h = 0.5 * (m10 - m01);
+        let q = e.hypot(h);
+        let r = f.hypot(g);
+        let a1 = g.atan2(f);
+        let a2 = h.atan2(e);
+        Svd2 {
+            phi: 0.5 * (a2 + a1),
+            theta: 0.5 * (a2 - a1),
+            s1: q + r,
+            s2: q - r,
+        }
+    }
+
+    /// Largest singular value.
+    pub fn max_singular(&self) -> f64 {
+        self.s1
+    }
+
+    /// Smallest singular value (≥ 0).
+    pub fn min_singular(&self) -> f64 {
+        self.s2.abs()
+    }
+
+    /// Rebuilds `R(φ) diag(s1, s2) R(θ)`.
+    pub fn matrix(&self) -> DMat2 {
+        DMat2::from_angle(self.phi)
+            * DMat2::from_diagonal(DVec2::new(self.s1, self.s2))
+            * DMat2::from_angle(self.theta)
+    }
+
+    /// `R(-θ) diag(f(s1), f(s2)) R(-φ)`: an inverse whose reciprocal singular values are chosen
+    /// by `f` (which receives the signed singular value).
+    fn inverse_with(&self, f: impl Fn(f64) -> f64) -> DMat2 {
+        DMat2::from_angle(-self.theta)
+            * DMat2::from_diagonal(DVec2::new(f(self.s1), f(self.s2)))
+            * DMat2::from_angle(-self.phi)
+    }
+
+    /// Inverse with every singular value raised to at least `floor` in magnitude (sign kept).
+    /// Equals the exact inverse when `min_singular() ≥ floor`; `floor` must be positive.
+    pub fn clamped_inverse(&self, floor: f64) -> DMat2 {
+        self.inverse_with(|s| {
+            let m = s.abs().max(floor);
+            if s < 0.0 {
+                -1.0 / m
+            } else {
+                1.0 / m
+            }
+        })
+    }
+
+    /// Moore–Penrose pseudo-inverse treating singular values below `threshold` as zero.
+    pub fn pseudo_inverse(&self, threshold: f64) -> DMat2 {
+        self.inverse_with(|s| if s.abs() > threshold { 1.0 / s } else { 0.0 })
+    }
+}
+
+/// Eigen-decomposition of the symmetric part of `m`: `(λ₁, λ₂, ψ)` with `λ₁ ≥ λ₂` and the
+/// eigenvector of `λ₁` equal to `(cos ψ, sin ψ)`.
+pub fn sym_eigen(m: DMat2) -> (f64, f64, f64) {
+    let a = m.x_axis.x;
+    let c = m.y_axis.y;
+    let b = 0.5 * (m.x_axis.y + m.y_axis.x);
+    let mean = 0.5 * (a + c);
+    let d = (0.5 * (a - c)).hypot(b);
+    let psi = 0.5 * (2.0 * b).atan2(a - c);
+    (mean + d, mean - d, psi)
+}
+
+/// Rebuilds `R(ψ) diag(λ₁, λ₂) R(-ψ)`.
+pub fn sym_from_eigen(l1: f64, l2: f64, psi: f64) -> DMat2 {
+    let (s, c) = psi.sin_cos();
+    // Columns of R(ψ) diag R(-ψ), written out to keep the result exactly symmetric.
+    let xx = l1 * c * c + l2 * s * s;
+    let yy = l1 * s * s + l2 * c * c;
+    let xy = (l1 - l2) * s * c;
+    DMat2::from_cols(DVec2::new(xx, xy), DVec2::new(xy, yy))
+}
+
+/// `(m + mᵀ) / 2`.
+pub fn symmetrize(m: DMat2) -> DMat2 {
+    let xy = 0.5 * (m.x_axis.y + m.y_axis.x);
+    DMat2::from_cols(DVec2::new(m.x_axis.x, xy), DVec2::new(xy, m.y_axis.y))
+}
+
+/// The result of [`clamp_covariance`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Clamped {
+    /// The symmetric, positive semi-definite, bounded covariance.
+    pub cov: DMat2,
+    /// Whether an eigenvalue had to be lowered to `max_variance` (or the input was not finite).
+    pub clamped_above: bool,
+}
+
+/// Symmetrises `m` and clamps its eigenvalues to `[0, max_variance]`. A non-finite input
+/// becomes `max_variance · I`.
+pub fn clamp_covariance(m: DMat2, max_variance: f64) -> Clamped {
+    if !m.is_finite() {
+        return Clamped {
+            cov: DMat2::from_diagonal(DVec2::splat(max_variance)),
+            clamped_above: true,
+        };
+    }
+    let s = symmetrize(m);
+    let (l1, l2, psi) = sym_eigen(s);
+    if l2 >= 0.0 && l1 <= max_variance {
+        return Clamped {
+            cov: s,
+            clamped_above: false,
+        };
+    }
+    Clamped {
+        cov: sym_from_eigen(
+            l1.clamp(0.0, max_variance),
+            l2.clamp(0.0, max_variance),
+            psi,
+        ),
+        clamped_above: l1 > max_variance,
+    }
+}
+
+/// Outer product `a bᵀ`.
+pub fn outer(a: DVec2, b: DVec2) -> DMat2 {
+    DMat2::from_cols(a * b.x, a * b.y)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    #[test]
+    fn svd_reconstructs_and_inverts() {
+        let mut st = 7u64;
+        for _ in 0..1000 {
+            let m = DMat2::from_cols(
+                DVec2::new(lcg(&mut st), lcg(&mut st)),
+                DVec2::new(lcg(&mut st), lcg(&mut st)),
+            ) * 3.0;
+            let svd = Svd2::new(m);
+            assert!(svd.s1 >= svd.s2.abs());
+            assert!((svd.matrix() - m).abs_diff_eq(DMat2::ZERO, 1e-12));
+            assert!((svd.s1 * svd.s2 - m.determinant()).abs() < 1e-12);
+            if svd.min_singular() > 1e-3 {
+                let inv = svd.clamped_inverse(1e-9);
+                assert!((inv * m).abs_diff_eq(DMat2::IDENTITY, 1e-9));
+                let pinv = svd.pseudo_inverse(1e-9);
+                assert!((pinv * m).abs_diff_eq(DMat2::IDENTITY, 1e-9));
+            }
+        }
+    }
+
+    #[test]
+    fn pseudo_inverse_of_rank_one() {
+        // M = a bᵀ; M⁺ = b aᵀ / (|a|² |b|²).
+        let a = DVec2::new(1.0, 2.0);
+        let b = DVec2::new(-0.5, 0.25);
+        let m = outer(a, b);
+        let p = Svd2::new(m).pseudo_inverse(1e-12);
+        let expect = outer(b, a) / (a.length_squared() * b.length_squared());
+        assert!((p - expect).abs_diff_eq(DMat2::ZERO, 1e-12));
+        // Clamped inverse keeps the weak direction at 1/floor.
+        let c = Svd2::new(m).clamped_inverse(1e-3);
+        // M's range is span(a); the inverse maps the orthogonal complement by 1/floor.
+        let w = DVec2::new(-a.y, a.x).normalize();
+        assert!(((c * w).length() - 1e3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn covariance_clamp() {
+        let m = DMat2::from_cols(DVec2::new(1.0, 2.0), DVec2::new(2.0, 1.0)); // eigen 3, -1
+        let c = clamp_covariance(m, 10.0);
+        let (l1, l2, _) = sym_eigen(c.cov);
+        assert!((l1 - 3.0).abs() < 1e-12 && l2.abs() < 1e-12 && !c.clamped_above);
+        let c = clamp_covariance(m * 100.0, 10.0);
+        let (l1, _, _) = sym_eigen(c.cov);
+        assert!((l1 - 10.0).abs() < 1e-9 && c.clamped_above);
+        let c = clamp_covariance(DMat2::from_cols(DVec2::NAN, DVec2::ONE), 10.0);
+        assert_eq!(c.cov, DMat2::from_diagonal(DVec2::splat(10.0)));
+    }
+}

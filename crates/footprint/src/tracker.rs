@@ -1,0 +1,144 @@
+//! Algorithm 1 of the supplemental as an O(1)-state tracker.
+
+use glam::{DMat2, DVec2, DVec3};
+
+use crate::constraint::{constraint_derivatives, ConstraintDerivatives};
+use crate::mat::{clamp_covariance, Svd2};
+use crate::vertex::{Scatter, Vertex};
+use crate::{C_CONDITION_LIMIT, MAX_VARIANCE, MIN_C_SINGULAR_VALUE};
+
+/// Propagates path footprints vertex by vertex (Algorithm 1).
+///
+/// State: `var_p = var(Δx_i)`, `var_pp = var(Δx_{i−1})`, `cov_p_pp = cov(Δx_i, Δx_{i−1})`
+/// (2×2 each, in the respective vertices' tangent frames), plus the previous and current
+/// [`Vertex`] so that [`advance`](Self::advance) can form `A_i, B_i, C_i` itself. No allocation.
+///
+/// Two ways to drive it:
+/// - *matrix mode*: [`start`](Self::start) with `var(Δx₁)`, then [`step`](Self::step) with
+///   `(A_i, B_i, C_i)` and `var(Δh_i)` for `i = 1, 2, …`; each call returns `var(Δx_{i+1})`.
+/// - *vertex mode*: [`start_path`](Self::start_path) with the camera position and the first
+///   hit, then [`advance`](Self::advance) once per bounce with the next vertex, the event at the
+///   current vertex and its `var(Δh)`.
+///
+/// Starting sets `var(Δx₀) = 0` and `cov(Δx₁, Δx₀) = 0` (the camera is fixed), so the general
+/// update reproduces lines 1–4 of Algorithm 1 for `i = 1` whatever `A₁` is.
+///
+/// Clamps (never NaN or infinite):
+/// - `C_i⁻¹` is a regularised inverse: singular values of `C_i` are raised to at least
+///   [`C_CONDITION_LIMIT`] × the largest and at least [`MIN_C_SINGULAR_VALUE`] (a grazing next
+///   vertex or a very distant one gives a large but bounded footprint);
+/// - every `var(Δx)` is symmetrised and its eigenvalues clamped to `[0, MAX_VARIANCE]`; when the
+///   upper bound bites, the cross-covariance is reset to zero (the clamped footprint no longer
+///   carries a linear relation to the previous vertex);
+/// - non-finite inputs (or an overflow) make the tracker *lost*: the footprint becomes
+///   `MAX_VARIANCE · I` with no correlation, and subsequent steps continue from there.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FootprintTracker {
+    var_p: DMat2,
+    var_pp: DMat2,
+    cov_p_pp: DMat2,
+    prev: Vertex,
+    cur: Vertex,
+}
+
+impl FootprintTracker {
+    /// Matrix mode: starts at `x₁` with footprint `var_x1` (e.g. [`crate::first_vertex_variance`]).
+    pub fn start(var_x1: DMat2) -> Self {
+        let p = Vertex::point(DVec3::ZERO);
+        Self::start_path_impl(p, p, var_x1)
+    }
+
+    /// Vertex mode: starts a path at the camera (`x₀`, a fixed point) whose first hit is
+    /// `first` (`x₁`) with footprint `var_x1`.
+    pub fn start_path(camera: DVec3, first: &Vertex, var_x1: DMat2) -> Self {
+        Self::start_path_impl(Vertex::point(camera), *first, var_x1)
+    }
+
+    fn start_path_impl(prev: Vertex, cur: Vertex, var_x1: DMat2) -> Self {
+        FootprintTracker {
+            var_p: clamp_covariance(var_x1, MAX_VARIANCE).cov,
+            var_pp: DMat2::ZERO,
+            cov_p_pp: DMat2::ZERO,
+            prev,
+            cur,
+        }
+    }
+
+    /// One iteration of Algorithm 1 for constraint `i` (the current vertex `x_i`): returns
+    /// `var(Δx_{i+1})` and makes `x_{i+1}` current. `var_h = var(Δh_i)` in `x_i`'s slope space
+    /// (see [`crate::half_vector_variance`]). The stored vertices are not touched; use
+    /// [`advance`](Self::advance) to keep them in step.
+    pub fn step(&mut self, d: &ConstraintDerivatives, var_h: DMat2) -> DMat2 {
+        if !d.is_finite() || !var_h.is_finite() {
+            return self.lose();
+        }
+        let var_h = clamp_covariance(var_h, MAX_VARIANCE).cov;
+        let (a, b) = (d.a, d.b);
+        let svd = Svd2::new(d.c);
+        let floor = (C_CONDITION_LIMIT * svd.max_singular()).max(MIN_C_SINGULAR_VALUE);
+        let c_inv = svd.clamped_inverse(floor);
+
+        // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i.
+        let cross = b * self.cov_p_pp * a.transpose();
+        let var_g = a * self.var_pp * a.transpose()
+            + b * self.var_p * b.transpose()
+            + cross
+            + cross.transpose();
+        // eq. (13) and eq. (16).
+        let var_next = c_inv * (var_h + var_g) * c_inv.transpose();
+        let cov_next = -(c_inv * (a * self.cov_p_pp.transpose() + b * self.var_p));
+
+        if !var_next.is_finite() || !cov_next.is_finite() {
+            return self.lose();
+        }
+        let clamped = clamp_covariance(var_next, MAX_VARIANCE);
+        self.var_pp = self.var_p;
+        self.var_p = clamped.cov;
+        self.cov_p_pp = if clamped.clamped_above {
+            DMat2::ZERO
+        } else {
+            cov_next
+        };
+        self.var_p
+    }
+
+    /// Vertex mode: the path scatters at the current vertex `x_i` (`scatter`, with roughness
+    /// giving `var_h = var(Δh_i)`) towards `next` (`x_{i+1}`). Forms `A_i, B_i, C_i` from the
+    /// stored `x_{i−1}, x_i` and `next`, applies [`step`](Self::step), and returns
+    /// `var(Δx_{i+1})` in `next`'s tangent frame.
+    pub fn advance(&mut self, next: &Vertex, scatter: Scatter, var_h: DMat2) -> DMat2 {
+        let d = constraint_derivatives(&self.prev, &self.cur, next, scatter);
+        let v = self.step(&d, var_h);
+        self.prev = self.cur;
+        self.cur = *next;
+        v
+    }
+
+    fn lose(&mut self) -> DMat2 {
+        let max = DMat2::from_diagonal(DVec2::splat(MAX_VARIANCE));
+        self.var_pp = self.var_p;
+        self.var_p = max;
+        self.cov_p_pp = DMat2::ZERO;
+        max
+    }
+
+    /// `var(Δx_i)` of the current vertex.
+    pub fn var_current(&self) -> DMat2 {
+        self.var_p
+    }
+
+    /// `var(Δx_{i−1})` of the previous vertex.
+    pub fn var_previous(&self) -> DMat2 {
+        self.var_pp
+    }
+
+    /// `cov(Δx_i, Δx_{i−1})`.
+    pub fn cov_current_previous(&self) -> DMat2 {
+        self.cov_p_pp
+    }
+
+    /// The current vertex `x_i` (vertex mode; a point at the origin in matrix mode).
+    pub fn current_vertex(&self) -> &Vertex {
+        &self.cur
+    }
+}
