@@ -3,7 +3,7 @@
 
 use glam::{DMat2, DVec2, DVec3};
 
-use crate::vertex::{Scatter, Vertex};
+use crate::vertex::{LocalGeometry, Scatter, Vertex};
 use crate::{MAX_ALPHA, MIN_COSINE, MIN_DISTANCE, MIN_ETA_OFFSET, MIN_HALF_VECTOR_NORM};
 
 /// The blocks of row `i` of the constraint derivative matrix (eq. 1 of the supplemental):
@@ -109,9 +109,20 @@ pub fn constraint_derivatives(
     next: &Vertex,
     scatter: Scatter,
 ) -> ConstraintDerivatives {
-    let lp = prev.local();
-    let lc = cur.local();
-    let ln = next.local();
+    constraint_derivatives_with(prev, &prev.local(), cur, &cur.local(), next, &next.local(), scatter)
+}
+
+/// [`constraint_derivatives`] with each vertex's [`LocalGeometry`] already computed (a tracker
+/// computes it once per vertex instead of once per use).
+pub fn constraint_derivatives_with(
+    prev: &Vertex,
+    lp: &LocalGeometry,
+    cur: &Vertex,
+    lc: &LocalGeometry,
+    next: &Vertex,
+    ln: &LocalGeometry,
+    scatter: Scatter,
+) -> ConstraintDerivatives {
     let (t, b, n) = (cur.t, cur.b, cur.n);
 
     let (wi, li) = unit_and_length(prev.p - cur.p);

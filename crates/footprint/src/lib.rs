@@ -66,7 +66,7 @@ mod vertex;
 
 pub use camera::{first_vertex_jacobian, first_vertex_variance, PIXEL_SIGMA};
 pub use constraint::{
-    constraint_derivatives, effective_eta, ggx_to_beckmann_alpha, half_vector_slope,
+    constraint_derivatives, constraint_derivatives_with, effective_eta, ggx_to_beckmann_alpha, half_vector_slope,
     half_vector_variance, half_vector_variance_aniso, ConstraintDerivatives, GGX_TO_BECKMANN,
 };
 pub use estimators::{pixel_spread_angle, PbrtDifferentials, RayCone};

@@ -7,6 +7,19 @@
 
 use glam::{DMat2, DVec2};
 
+/// `√(a² + b²)`. The libm `hypot` guards against overflow at a large cost; entries here are
+/// bounded by the clamps (variances ≤ 1e16, so squares ≤ 1e32 ≪ f64::MAX), and the scaled form
+/// below keeps the result finite for any finite input anyway.
+#[inline]
+fn hypot(a: f64, b: f64) -> f64 {
+    let s = a * a + b * b;
+    if s.is_finite() {
+        s.sqrt()
+    } else {
+        a.hypot(b)
+    }
+}
+
 /// A 2×2 singular value decomposition `M = R(φ) · diag(σ₁, σ₂) · R(θ)`, where `R(a)` is the
 /// counter-clockwise rotation by `a`. `σ₁ ≥ |σ₂|`; `σ₂` carries the sign of `det M`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -29,8 +42,8 @@ impl Svd2 {
         let f = 0.5 * (m00 - m11);
         let g = 0.5 * (m10 + m01);
         let h = 0.5 * (m10 - m01);
-        let q = e.hypot(h);
-        let r = f.hypot(g);
+        let q = hypot(e, h);
+        let r = hypot(f, g);
         let a1 = g.atan2(f);
         let a2 = h.atan2(e);
         Svd2 {
@@ -92,7 +105,7 @@ pub fn sym_eigen(m: DMat2) -> (f64, f64, f64) {
     let c = m.y_axis.y;
     let b = 0.5 * (m.x_axis.y + m.y_axis.x);
     let mean = 0.5 * (a + c);
-    let d = (0.5 * (a - c)).hypot(b);
+    let d = hypot(0.5 * (a - c), b);
     let psi = 0.5 * (2.0 * b).atan2(a - c);
     (mean + d, mean - d, psi)
 }
@@ -111,6 +124,41 @@ pub fn sym_from_eigen(l1: f64, l2: f64, psi: f64) -> DMat2 {
 pub fn symmetrize(m: DMat2) -> DMat2 {
     let xy = 0.5 * (m.x_axis.y + m.y_axis.x);
     DMat2::from_cols(DVec2::new(m.x_axis.x, xy), DVec2::new(xy, m.y_axis.y))
+}
+
+/// Singular values `(σ₁, σ₂)` of `m` in closed form without trigonometry (`σ₂` signed like
+/// `det m`), the same values [`Svd2::new`] computes.
+#[inline]
+pub fn singular_values(m: DMat2) -> (f64, f64) {
+    let (m00, m10, m01, m11) = (m.x_axis.x, m.x_axis.y, m.y_axis.x, m.y_axis.y);
+    let q = hypot(0.5 * (m00 + m11), 0.5 * (m10 - m01));
+    let r = hypot(0.5 * (m00 - m11), 0.5 * (m10 + m01));
+    (q + r, q - r)
+}
+
+/// [`Svd2::clamped_inverse`] of `m`, taking the plain inverse when no singular value is below
+/// `floor` (the common case: no trigonometry) and the decomposition otherwise.
+#[inline]
+pub fn clamped_inverse(m: DMat2, floor: f64) -> DMat2 {
+    let (_, s2) = singular_values(m);
+    if s2.abs() >= floor && s2 != 0.0 {
+        m.inverse()
+    } else {
+        Svd2::new(m).clamped_inverse(floor)
+    }
+}
+
+/// [`Svd2::pseudo_inverse`] of `m`, with the same fast path as [`clamped_inverse`].
+#[inline]
+pub fn pseudo_inverse(m: DMat2, threshold: f64) -> DMat2 {
+    let (s1, s2) = singular_values(m);
+    if s2.abs() > threshold && s2 != 0.0 {
+        m.inverse()
+    } else if !(s1 > threshold) {
+        DMat2::ZERO
+    } else {
+        Svd2::new(m).pseudo_inverse(threshold)
+    }
 }
 
 /// The result of [`clamp_covariance`].
@@ -132,13 +180,16 @@ pub fn clamp_covariance(m: DMat2, max_variance: f64) -> Clamped {
         };
     }
     let s = symmetrize(m);
-    let (l1, l2, psi) = sym_eigen(s);
-    if l2 >= 0.0 && l1 <= max_variance {
+    // Eigenvalues without the angle first: most covariances need no clamping.
+    let mean = 0.5 * (s.x_axis.x + s.y_axis.y);
+    let d = hypot(0.5 * (s.x_axis.x - s.y_axis.y), s.x_axis.y);
+    if mean - d >= 0.0 && mean + d <= max_variance {
         return Clamped {
             cov: s,
             clamped_above: false,
         };
     }
+    let (l1, l2, psi) = sym_eigen(s);
     Clamped {
         cov: sym_from_eigen(
             l1.clamp(0.0, max_variance),
@@ -182,6 +233,35 @@ mod tests {
                 assert!((inv * m).abs_diff_eq(DMat2::IDENTITY, 1e-9));
                 let pinv = svd.pseudo_inverse(1e-9);
                 assert!((pinv * m).abs_diff_eq(DMat2::IDENTITY, 1e-9));
+            }
+        }
+    }
+
+    #[test]
+    fn fast_inverses_agree_with_the_decomposition() {
+        let mut st = 11u64;
+        for k in 0..2000 {
+            let mut m = DMat2::from_cols(
+                DVec2::new(lcg(&mut st), lcg(&mut st)),
+                DVec2::new(lcg(&mut st), lcg(&mut st)),
+            );
+            if k % 3 == 0 {
+                // Nearly singular: the slow path must be taken.
+                m.y_axis = m.x_axis * 0.5 + DVec2::splat(1e-7 * lcg(&mut st));
+            }
+            let svd = Svd2::new(m);
+            let (s1, s2) = singular_values(m);
+            assert!((s1 - svd.s1).abs() < 1e-12 && (s2 - svd.s2).abs() < 1e-12);
+            for floor in [1e-9, 1e-3, 0.3] {
+                // Relative to the size of the inverse (ill-conditioned inverses are large).
+                let close = |a: DMat2, b: DMat2| {
+                    let scale = 1.0 + b.abs().to_cols_array().iter().fold(0.0f64, |m, v| m.max(*v));
+                    // Both routes lose about ε·cond(m) relative precision.
+                    let cond = s1 / s2.abs().max(floor);
+                    (a - b).abs_diff_eq(DMat2::ZERO, (1e-9 + 1e-14 * cond) * scale)
+                };
+                assert!(close(clamped_inverse(m, floor), svd.clamped_inverse(floor)));
+                assert!(close(pseudo_inverse(m, floor), svd.pseudo_inverse(floor)));
             }
         }
     }

@@ -2,9 +2,9 @@
 
 use glam::{DMat2, DVec2, DVec3};
 
-use crate::constraint::{constraint_derivatives, ConstraintDerivatives};
-use crate::mat::{clamp_covariance, Svd2};
-use crate::vertex::{Scatter, Vertex};
+use crate::constraint::{constraint_derivatives_with, ConstraintDerivatives};
+use crate::mat::clamp_covariance;
+use crate::vertex::{LocalGeometry, Scatter, Vertex};
 use crate::{C_CONDITION_LIMIT, MAX_VARIANCE, MIN_C_SINGULAR_VALUE};
 
 /// Propagates path footprints vertex by vertex (Algorithm 1).
@@ -39,6 +39,9 @@ pub struct FootprintTracker {
     cov_p_pp: DMat2,
     prev: Vertex,
     cur: Vertex,
+    /// Local geometry of `prev` and `cur`, computed once when each vertex joined the path.
+    prev_local: LocalGeometry,
+    cur_local: LocalGeometry,
 }
 
 impl FootprintTracker {
@@ -59,6 +62,8 @@ impl FootprintTracker {
             var_p: clamp_covariance(var_x1, MAX_VARIANCE).cov,
             var_pp: DMat2::ZERO,
             cov_p_pp: DMat2::ZERO,
+            prev_local: prev.local(),
+            cur_local: cur.local(),
             prev,
             cur,
         }
@@ -74,9 +79,9 @@ impl FootprintTracker {
         }
         let var_h = clamp_covariance(var_h, MAX_VARIANCE).cov;
         let (a, b) = (d.a, d.b);
-        let svd = Svd2::new(d.c);
-        let floor = (C_CONDITION_LIMIT * svd.max_singular()).max(MIN_C_SINGULAR_VALUE);
-        let c_inv = svd.clamped_inverse(floor);
+        let (c_max, _) = crate::mat::singular_values(d.c);
+        let floor = (C_CONDITION_LIMIT * c_max).max(MIN_C_SINGULAR_VALUE);
+        let c_inv = crate::mat::clamped_inverse(d.c, floor);
 
         // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i.
         let cross = b * self.cov_p_pp * a.transpose();
@@ -107,10 +112,21 @@ impl FootprintTracker {
     /// stored `x_{i−1}, x_i` and `next`, applies [`step`](Self::step), and returns
     /// `var(Δx_{i+1})` in `next`'s tangent frame.
     pub fn advance(&mut self, next: &Vertex, scatter: Scatter, var_h: DMat2) -> DMat2 {
-        let d = constraint_derivatives(&self.prev, &self.cur, next, scatter);
+        let next_local = next.local();
+        let d = constraint_derivatives_with(
+            &self.prev,
+            &self.prev_local,
+            &self.cur,
+            &self.cur_local,
+            next,
+            &next_local,
+            scatter,
+        );
         let v = self.step(&d, var_h);
         self.prev = self.cur;
+        self.prev_local = self.cur_local;
         self.cur = *next;
+        self.cur_local = next_local;
         v
     }
 

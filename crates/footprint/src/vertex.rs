@@ -2,7 +2,6 @@
 
 use glam::{DMat2, DVec2, DVec3};
 
-use crate::mat::Svd2;
 use crate::UV_CONDITION_LIMIT;
 
 /// A path vertex as the renderer knows it: position, shading frame, surface derivatives and uv.
@@ -95,11 +94,10 @@ impl Vertex {
             DVec2::new(t.dot(self.dpdu), b.dot(self.dpdu)),
             DVec2::new(t.dot(self.dpdv), b.dot(self.dpdv)),
         );
-        let svd = Svd2::new(m);
-        let smax = svd.max_singular();
+        let (smax, _) = crate::mat::singular_values(m);
         let (j_geo, j_uv) = if smax > 0.0 && smax.is_finite() {
             let floor = UV_CONDITION_LIMIT * smax;
-            (svd.pseudo_inverse(floor), svd.clamped_inverse(floor))
+            (crate::mat::pseudo_inverse(m, floor), crate::mat::clamped_inverse(m, floor))
         } else {
             (DMat2::ZERO, DMat2::ZERO)
         };

@@ -18,7 +18,7 @@ fn scenes(c: &mut Criterion) {
         group.bench_function(name, |b| {
             b.iter(|| {
                 seed += 1;
-                render(&scene, RenderSettings { spp: 1, seed }, &|_| {})
+                render(&scene, RenderSettings::new(1, seed), &|_| {})
             })
         });
     }

@@ -90,6 +90,11 @@ impl Camera {
         }
     }
 
+    /// Angle subtended by one pixel at the image centre, vertically (for ray cones).
+    pub fn pixel_spread_angle(&self) -> f64 {
+        footprint::pixel_spread_angle(2.0 * (self.tan_half_y as f64).atan(), self.height)
+    }
+
     /// Camera position.
     pub fn origin(&self) -> Vec3 {
         self.origin

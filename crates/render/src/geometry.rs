@@ -218,6 +218,22 @@ fn intersect_disk(to_object: &Affine3A, o: Vec3, d: Vec3, tmin: f32, tmax: f32) 
     }
 }
 
+/// The BVH crate's ray. Negative zeros in the direction become positive: the traversal picks
+/// child order from the direction's sign bits but inverts components with a sign-blind guard,
+/// so a −0.0 component (as in `-Vec3::Z`) made the two disagree and rays miss.
+#[inline]
+fn bvh_ray(ray: &Ray) -> obvhs::ray::Ray {
+    let d = ray.d + Vec3::ZERO;
+    obvhs::ray::Ray::new(ray.o.into(), d.into(), ray.tmin, ray.tmax)
+}
+
+/// Gives a disk's box a little thickness around its corners' bounds (a conservative margin for
+/// the rounding of the transformed corners).
+fn padded(bb: Aabb) -> Aabb {
+    let pad = Vec3A::splat(1e-6 * (1.0 + bb.diagonal().length() + bb.center().abs().max_element()));
+    Aabb::new(bb.min - pad, bb.max + pad)
+}
+
 impl Accel {
     /// Builds the BVH over every primitive of `shapes`.
     pub fn build(shapes: &[Shape]) -> Self {
@@ -249,9 +265,7 @@ impl Accel {
                     for (x, y) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
                         bb.extend(Vec3A::from(to_world.transform_point3(Vec3::new(x, y, 0.0))));
                     }
-                    // Give flat boxes a little thickness.
-                    let pad = Vec3A::splat(1e-5 * (1.0 + bb.diagonal().length()));
-                    aabbs.push(Aabb::new(bb.min - pad, bb.max + pad));
+                    aabbs.push(padded(bb));
                     prims.push(PrimRef { shape: si as u32, index: 0 });
                     tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
                 }
@@ -307,7 +321,7 @@ impl Accel {
         if self.prims.is_empty() {
             return None;
         }
-        let bray = obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax);
+        let bray = bvh_ray(ray);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best_bary = Vec2::ZERO;
         let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
@@ -332,7 +346,7 @@ impl Accel {
         if self.prims.is_empty() {
             return false;
         }
-        let bray = obvhs::ray::Ray::new(ray.o.into(), ray.d.into(), ray.tmin, ray.tmax);
+        let bray = bvh_ray(ray);
         !self.bvh.ray_traverse_miss(bray, |r, id| {
             self.intersect_prim(shapes, id, ray.o, ray.d, ray.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
         })

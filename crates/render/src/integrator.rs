@@ -10,8 +10,10 @@ use crate::film::Image;
 use crate::geometry::{interaction, Ray, SurfaceInteraction};
 use crate::math::{max_component, Spectrum};
 use crate::sampling::Rng;
+use crate::pathfootprint::{vertex_of, FootprintMode, PathFootprint};
 use crate::scene::Scene;
-use glam::{Vec2, Vec3};
+use footprint::Vertex;
+use glam::{DMat2, Vec2, Vec3};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -40,11 +42,21 @@ impl RenderCounts {
     }
 }
 
+/// Bounces the footprint AOV reports (vertices x₁, x₂, x₃).
+pub const AOV_BOUNCES: usize = 3;
+
+/// Value of the footprint AOV where no sample reached that bounce.
+pub const AOV_NO_VERTEX: f32 = footprint::LOD_MIN;
+
 /// What a render produced.
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
     /// The image (linear RGB).
     pub image: Image,
+    /// Footprint AOV when asked for: channel k is the mean LOD (log2 of the footprint's
+    /// standard deviation along its major axis, in texels of the requested density) at bounce
+    /// k + 1, over the samples that reached it; [`AOV_NO_VERTEX`] where none did.
+    pub footprint_aov: Option<Image>,
     /// Counters.
     pub counts: RenderCounts,
     /// Wall-clock time of the rendering phase.
@@ -58,7 +70,64 @@ pub struct RenderSettings {
     pub spp: u32,
     /// Seed of all random streams.
     pub seed: u64,
+    /// Footprint estimator carried by camera paths.
+    pub footprint: FootprintMode,
+    /// When set, also produce the footprint AOV with this many texels per uv unit.
+    pub footprint_aov_density: Option<f64>,
 }
+
+impl RenderSettings {
+    /// `spp` samples with `seed` and the default (covariance) footprints.
+    pub fn new(spp: u32, seed: u64) -> Self {
+        RenderSettings { spp, seed, footprint: FootprintMode::default(), footprint_aov_density: None }
+    }
+}
+
+/// What happened at a path vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// Glossy or specular reflection.
+    Reflect,
+    /// Transmission through an interface.
+    Refract,
+    /// A diffuse bounce.
+    Diffuse,
+    /// The path ended on an emitter.
+    Emit,
+    /// The path ended here without scattering (depth limit, roulette, black or back-facing BSDF).
+    Absorb,
+    /// The ray left the scene.
+    Escape,
+}
+
+impl Event {
+    /// Lower-case name used in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Event::Reflect => "reflect",
+            Event::Refract => "refract",
+            Event::Diffuse => "diffuse",
+            Event::Emit => "emit",
+            Event::Absorb => "absorb",
+            Event::Escape => "escape",
+        }
+    }
+}
+
+/// Receives what happens along a camera path; the render loop uses [`NoObserver`], which
+/// compiles to nothing.
+pub trait PathObserver {
+    /// A surface hit at `depth` (0 = first hit) with its tangent-plane footprint covariance.
+    fn hit(&mut self, _depth: u32, _si: &SurfaceInteraction, _vertex: Option<&Vertex>, _var: DMat2) {}
+    /// What the path did at `depth`: the sampled event with the lobe's roughness and IOR ratio.
+    fn event(&mut self, _depth: u32, _event: Event, _alpha: f32, _eta: f32) {}
+    /// The ray left the scene after `depth` hits, along `dir`.
+    fn escape(&mut self, _depth: u32, _dir: Vec3) {}
+}
+
+/// An observer that records nothing.
+pub struct NoObserver;
+impl PathObserver for NoObserver {}
 
 /// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
 pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
@@ -67,7 +136,7 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<(Vec<Spectrum>, RenderCounts)> = tiles
+    let results: Vec<(Vec<(Spectrum, Spectrum)>, RenderCounts)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let (x0, y0) = (tx * TILE, ty * TILE);
@@ -76,7 +145,7 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
             let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
             for y in y0..y1 {
                 for x in x0..x1 {
-                    px.push(render_pixel(scene, settings, x, y, &mut counts));
+                    px.push(render_pixel_aov(scene, settings, x, y, &mut counts));
                 }
             }
             progress(px.len() as u64);
@@ -84,6 +153,7 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
         })
         .collect();
     let mut image = Image::new(w, h);
+    let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
     let mut counts = RenderCounts::default();
     for (&(tx, ty), (px, c)) in tiles.iter().zip(&results) {
         counts.add(c);
@@ -91,14 +161,58 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
         let tw = (x0 + TILE).min(w) - x0;
         for (i, p) in px.iter().enumerate() {
             let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
-            image.pixels[(y * w + x) as usize] = *p;
+            image.pixels[(y * w + x) as usize] = p.0;
+            if let Some(a) = &mut aov {
+                a.pixels[(y * w + x) as usize] = p.1;
+            }
         }
     }
-    RenderOutput { image, counts, time: start.elapsed() }
+    RenderOutput { image, footprint_aov: aov, counts, time: start.elapsed() }
+}
+
+/// Accumulates per-bounce LODs for the footprint AOV.
+struct LodObserver {
+    density: f64,
+    sum: [f64; AOV_BOUNCES],
+    count: [u32; AOV_BOUNCES],
+}
+
+impl PathObserver for LodObserver {
+    fn hit(&mut self, depth: u32, _si: &SurfaceInteraction, vertex: Option<&Vertex>, var: DMat2) {
+        if let (Some(v), true) = (vertex, (depth as usize) < AOV_BOUNCES) {
+            let lod = footprint::lod(footprint::uv_covariance(var, v), self.density);
+            self.sum[depth as usize] += lod as f64;
+            self.count[depth as usize] += 1;
+        }
+    }
+}
+
+/// A pixel's radiance and, when asked for, its footprint AOV value.
+fn render_pixel_aov(scene: &Scene, settings: RenderSettings, x: u32, y: u32, counts: &mut RenderCounts) -> (Spectrum, Spectrum) {
+    let Some(density) = settings.footprint_aov_density else {
+        return (render_pixel(scene, settings, x, y, counts), Spectrum::ZERO);
+    };
+    let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
+    let l = render_pixel_with(scene, settings, x, y, counts, &mut obs);
+    let lods: [f32; AOV_BOUNCES] =
+        std::array::from_fn(|k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX });
+    (l, Spectrum::from_array(lods))
 }
 
 /// Mean radiance of one pixel over `settings.spp` samples.
 pub fn render_pixel(scene: &Scene, settings: RenderSettings, x: u32, y: u32, counts: &mut RenderCounts) -> Spectrum {
+    render_pixel_with(scene, settings, x, y, counts, &mut NoObserver)
+}
+
+/// [`render_pixel`], reporting every path to `obs`.
+pub fn render_pixel_with<O: PathObserver>(
+    scene: &Scene,
+    settings: RenderSettings,
+    x: u32,
+    y: u32,
+    counts: &mut RenderCounts,
+    obs: &mut O,
+) -> Spectrum {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
     let mut sum = Spectrum::ZERO;
     for s in 0..settings.spp {
@@ -106,7 +220,7 @@ pub fn render_pixel(scene: &Scene, settings: RenderSettings, x: u32, y: u32, cou
         let offset = scene.rfilter.sample(|| rng.next_f32());
         let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
         let cam = scene.camera.generate_ray(film);
-        let l = radiance(scene, &cam, &mut rng, counts);
+        let l = radiance(scene, settings, &cam, &mut rng, counts, obs);
         counts.samples += 1;
         if l.is_finite() {
             sum += l;
@@ -144,8 +258,16 @@ fn mis(a: f32, b: f32) -> f32 {
     }
 }
 
-/// Incident radiance along a camera ray (Mitsuba's `path` integrator).
-pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut RenderCounts) -> Spectrum {
+/// Incident radiance along a camera ray (Mitsuba's `path` integrator), with the path's
+/// footprints tracked by `settings.footprint` and reported to `obs`.
+pub fn radiance<O: PathObserver>(
+    scene: &Scene,
+    settings_r: RenderSettings,
+    cam: &CameraRay,
+    rng: &mut Rng,
+    counts: &mut RenderCounts,
+    obs: &mut O,
+) -> Spectrum {
     let settings = scene.integrator;
     let n_emitters = scene.emitters.len();
     let select_pdf = if n_emitters > 0 { 1.0 / n_emitters as f32 } else { 0.0 };
@@ -158,6 +280,11 @@ pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut Rend
     let mut prev_p = ray.o;
     let mut prev_pdf = 0.0f32;
     let mut prev_delta = true;
+    // Footprint state: the estimator, the previous vertex and what was sampled there.
+    let track = settings_r.footprint != FootprintMode::None;
+    let mut fp = PathFootprint::None;
+    let mut prev_vertex: Option<Vertex> = None;
+    let mut prev_bs: Option<crate::bsdf::BsdfSample> = None;
     loop {
         counts.rays += 1;
         let hit = scene.accel.intersect(&scene.shapes, &ray);
@@ -168,10 +295,22 @@ pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut Rend
                 let w = if prev_delta { 1.0 } else { mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, Vec3::ZERO, Vec3::ZERO, ray.d)) };
                 result += throughput * le * w;
             }
+            obs.escape(depth, ray.d);
             break;
         };
         let si = interaction(&scene.shapes, &ray, &hit);
         let shape = &scene.shapes[si.shape as usize];
+        let vertex = if track { Some(vertex_of(&si)) } else { None };
+        let var = match (&vertex, &prev_vertex, &prev_bs) {
+            (Some(v), None, _) => {
+                let (state, var) = PathFootprint::start(settings_r.footprint, &scene.camera, cam, v, settings_r.spp);
+                fp = state;
+                var
+            }
+            (Some(v), Some(pv), Some(bs)) => fp.advance(pv, bs, ray.d, v),
+            _ => DMat2::ZERO,
+        };
+        obs.hit(depth, &si, vertex.as_ref(), var);
         if let Some(ei) = shape.emitter {
             let e = &scene.emitters[ei as usize];
             if let crate::emitter::Emitter::Area { radiance, .. } = e {
@@ -182,6 +321,7 @@ pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut Rend
             }
         }
         if depth + 1 >= settings.max_depth {
+            obs.event(depth, if shape.emitter.is_some() { Event::Emit } else { Event::Absorb }, 0.0, 1.0);
             break;
         }
         let bsdf = scene.materials[shape.material as usize].at(si.uv);
@@ -213,10 +353,21 @@ pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut Rend
         // Continue the path by sampling the BSDF.
         let u_lobe = rng.next_f32();
         let u = rng.next_2d();
-        let Some(bs) = bsdf.sample(wi, u_lobe, u) else { break };
+        let ended = if shape.emitter.is_some() { Event::Emit } else { Event::Absorb };
+        let Some(bs) = bsdf.sample(wi, u_lobe, u) else {
+            obs.event(depth, ended, 0.0, 1.0);
+            break;
+        };
         if !(bs.pdf > 0.0) || !bs.weight.is_finite() || max_component(bs.weight) <= 0.0 {
+            obs.event(depth, ended, 0.0, 1.0);
             break;
         }
+        let event = match (bs.kind, bs.transmitted) {
+            (_, true) => Event::Refract,
+            (crate::bsdf::LobeKind::Diffuse, false) => Event::Diffuse,
+            _ => Event::Reflect,
+        };
+        obs.event(depth, event, bs.alpha, bs.eta);
         throughput *= bs.weight;
         eta *= bs.eta;
         prev_p = si.p;
@@ -224,6 +375,10 @@ pub fn radiance(scene: &Scene, cam: &CameraRay, rng: &mut Rng, counts: &mut Rend
         prev_delta = matches!(bs.kind, crate::bsdf::LobeKind::Specular);
         ray = spawn_ray(&si, si.sh.to_world(bs.wo));
         depth += 1;
+        if track {
+            prev_vertex = vertex;
+            prev_bs = Some(bs);
+        }
 
         if depth >= settings.rr_depth {
             let q = (max_component(throughput) * eta * eta).min(0.95);

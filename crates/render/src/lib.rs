@@ -16,6 +16,7 @@ pub mod integrator;
 pub mod loader;
 pub mod math;
 pub mod mesh;
+pub mod pathfootprint;
 pub mod sampling;
 pub mod scene;
 pub mod texture;

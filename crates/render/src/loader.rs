@@ -24,6 +24,9 @@ pub const MAX_PIXELS: u64 = 1 << 28;
 
 /// Loads a scene file; `defines` override its `<default>` values.
 pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
+    if !path.is_file() {
+        return Err(crate::error::Error::in_file(path, "scene file not found"));
+    }
     let root = xml::parse_file(path, defines)?;
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
     Builder::new(base).build(&root)

@@ -38,7 +38,7 @@ fn check_scene(name: &str, spp: u32) {
     let scene_path = refs().join("scenes").join(format!("{name}.xml"));
     let scene = render::loader::load_file(&scene_path, &[]).unwrap_or_else(|e| panic!("{e}"));
     let reference = Image::load_exr(&refs().join("images").join(format!("{name}.exr"))).unwrap();
-    let run = |spp, seed| render(&scene, RenderSettings { spp, seed }, &|_| {}).image;
+    let run = |spp, seed| render(&scene, RenderSettings::new(spp, seed), &|_| {}).image;
     let a = run(spp, 1);
     let b = run(spp, 2);
     let c = run(4 * spp, 3);

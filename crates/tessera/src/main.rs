@@ -1,10 +1,14 @@
 //! The `tessera` command: renders Mitsuba 3 scenes (or an embedded demo) and reports where the
 //! time went.
 
+mod footprint_cmd;
+mod heatmap;
+
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use render::integrator::{render, RenderSettings};
+use render::integrator::{render, RenderSettings, AOV_NO_VERTEX};
+use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
 use serde_json::json;
 use std::io::IsTerminal;
@@ -25,6 +29,8 @@ struct Cli {
 enum Command {
     /// Render a scene (Mitsuba 3 XML) to EXR and/or PNG.
     Render(RenderArgs),
+    /// Trace one camera path and print the footprint at each of its vertices.
+    Footprint(footprint_cmd::FootprintArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -52,12 +58,27 @@ struct RenderArgs {
     /// Override a scene <default>: -D name=value (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     define: Vec<String>,
+    /// Footprint estimator carried by camera paths: covariance, raycone, pbrt or none.
+    #[arg(long, default_value = "covariance", value_parser = parse_footprint)]
+    footprint: FootprintMode,
+    /// Extra outputs: `footprint` writes <out>.footprint.exr (mean LOD at bounces 1, 2, 3 in
+    /// R, G, B) and <out>.footprint.png (a heat map).
+    #[arg(long, value_parser = ["footprint"])]
+    aov: Vec<String>,
+    /// Texels per uv unit at level 0 for footprint LODs in AOVs.
+    #[arg(long, default_value_t = 1024.0)]
+    aov_density: f64,
+}
+
+fn parse_footprint(s: &str) -> Result<FootprintMode, String> {
+    s.parse()
 }
 
 fn main() {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
+        Command::Footprint(args) => footprint_cmd::run(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -65,7 +86,7 @@ fn main() {
     }
 }
 
-fn parse_defines(defs: &[String]) -> Result<Vec<(String, String)>> {
+pub(crate) fn parse_defines(defs: &[String]) -> Result<Vec<(String, String)>> {
     defs.iter()
         .map(|d| match d.split_once('=') {
             Some((k, v)) if !k.is_empty() => Ok((k.to_string(), v.to_string())),
@@ -76,14 +97,14 @@ fn parse_defines(defs: &[String]) -> Result<Vec<(String, String)>> {
 
 fn run_render(args: RenderArgs) -> Result<()> {
     let defines = parse_defines(&args.define)?;
+    if !(args.aov_density.is_finite() && args.aov_density > 0.0) {
+        bail!("--aov-density must be a positive number, got {}", args.aov_density);
+    }
     if let Some(0) = args.threads {
         bail!("--threads must be at least 1");
     }
     let t_load = Instant::now();
-    let scene: Scene = match &args.scene {
-        Some(path) => render::loader::load_file(path, &defines)?,
-        None => render::loader::load_str(DEFAULT_SCENE, Path::new("<embedded default scene>"), Path::new("."), &defines)?,
-    };
+    let scene = load_scene(args.scene.as_deref(), &defines)?;
     let load_s = t_load.elapsed().as_secs_f64();
     let spp = args.spp.unwrap_or(scene.spp);
     if spp == 0 || spp > 1 << 24 {
@@ -119,19 +140,38 @@ fn run_render(args: RenderArgs) -> Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let out = pool.install(|| render(&scene, RenderSettings { spp, seed }, &|n| bar.inc(n)));
+    let want_aov = args.aov.iter().any(|a| a == "footprint");
+    if want_aov && args.footprint == FootprintMode::None {
+        bail!("--aov footprint needs a footprint estimator (not --footprint none)");
+    }
+    let settings = RenderSettings {
+        footprint: args.footprint,
+        footprint_aov_density: want_aov.then_some(args.aov_density),
+        ..RenderSettings::new(spp, seed)
+    };
+    let out = pool.install(|| render(&scene, settings, &|n| bar.inc(n)));
     bar.finish_and_clear();
 
     let t_write = Instant::now();
     for o in &outputs {
         out.image.save(o)?;
     }
+    let mut aov_files = Vec::new();
+    if let Some(aov) = &out.footprint_aov {
+        let stem = outputs[0].with_extension("");
+        let exr = PathBuf::from(format!("{}.footprint.exr", stem.display()));
+        let png = PathBuf::from(format!("{}.footprint.png", stem.display()));
+        aov.save(&exr)?;
+        heatmap::write_heatmap(aov, AOV_NO_VERTEX, &png)?;
+        aov_files.push(exr);
+        aov_files.push(png);
+    }
     let write_s = t_write.elapsed().as_secs_f64();
     let render_s = out.time.as_secs_f64();
     let c = out.counts;
     let total_rays = c.rays + c.shadow_rays;
     if !args.quiet {
-        let names: Vec<String> = outputs.iter().map(|p| p.display().to_string()).collect();
+        let names: Vec<String> = outputs.iter().chain(&aov_files).map(|p| p.display().to_string()).collect();
         eprintln!(
             "rendered {w}x{h} at {spp} spp in {render_s:.2} s on {threads} threads: {:.3} Msamples/s, {:.2} Mrays/s; wrote {}",
             c.samples as f64 / render_s / 1e6,
@@ -147,6 +187,8 @@ fn run_render(args: RenderArgs) -> Result<()> {
             "schema": "tessera.stats/1",
             "scene": args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "<embedded default scene>".into()),
             "images": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "aovs": aov_files.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
+            "footprint": format!("{:?}", args.footprint).to_lowercase(),
             "width": w,
             "height": h,
             "spp": spp,
@@ -169,7 +211,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+/// Loads a scene file, or the embedded demo scene when none is given.
+pub(crate) fn load_scene(path: Option<&Path>, defines: &[(String, String)]) -> Result<Scene> {
+    Ok(match path {
+        Some(path) => render::loader::load_file(path, defines)?,
+        None => render::loader::load_str(DEFAULT_SCENE, Path::new("<embedded default scene>"), Path::new("."), defines)?,
+    })
+}
+
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
     std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
