@@ -17,11 +17,7 @@ pub(crate) fn transfer(d_origin: DVec3, dir: DVec3, d_dir: DVec3, s: f64, g: DVe
     let v = d_origin + d_dir * s;
     let dn = dir.dot(g);
     let floor = MIN_COSINE * dir.length();
-    let dn = if dn.abs() >= floor {
-        dn
-    } else {
-        floor.copysign(dn)
-    };
+    let dn = if dn.abs() >= floor { dn } else { floor.copysign(dn) };
     v - dir * (v.dot(g) / dn)
 }
 
@@ -49,10 +45,7 @@ pub fn first_vertex_jacobian(
     let s = (hit.p - camera_origin).dot(dir) / dir.length_squared();
     let dpx = transfer(DVec3::ZERO, dir, d_dir_dpx, s, g);
     let dpy = transfer(DVec3::ZERO, dir, d_dir_dpy, s, g);
-    let j = DMat2::from_cols(
-        DVec2::new(hit.t.dot(dpx), hit.b.dot(dpx)),
-        DVec2::new(hit.t.dot(dpy), hit.b.dot(dpy)),
-    );
+    let j = DMat2::from_cols(DVec2::new(hit.t.dot(dpx), hit.b.dot(dpx)), DVec2::new(hit.t.dot(dpy), hit.b.dot(dpy)));
     if j.is_finite() {
         j
     } else {

@@ -33,11 +33,7 @@ impl ConstraintDerivatives {
 /// index-matched interface has no half vector; nearby, the constraint degenerates gracefully to
 /// straight propagation because roughness then barely deflects the path).
 pub fn effective_eta(eta: f64) -> f64 {
-    let e = if eta.is_finite() && eta > 0.0 {
-        eta.clamp(1e-3, 1e3)
-    } else {
-        1.0
-    };
+    let e = if eta.is_finite() && eta > 0.0 { eta.clamp(1e-3, 1e3) } else { 1.0 };
     if (e - 1.0).abs() < MIN_ETA_OFFSET {
         if e < 1.0 {
             1.0 - MIN_ETA_OFFSET
@@ -103,12 +99,7 @@ pub fn half_vector_slope(prev_p: DVec3, cur: &Vertex, next_p: DVec3, scatter: Sc
 /// Clamps: distances below [`MIN_DISTANCE`] are raised to it; `|h·n|` is kept at least
 /// [`MIN_COSINE`]`·|h|` (and [`MIN_HALF_VECTOR_NORM`]) so that grazing half vectors give large
 /// but finite slopes; refraction uses [`effective_eta`]. For finite inputs the result is finite.
-pub fn constraint_derivatives(
-    prev: &Vertex,
-    cur: &Vertex,
-    next: &Vertex,
-    scatter: Scatter,
-) -> ConstraintDerivatives {
+pub fn constraint_derivatives(prev: &Vertex, cur: &Vertex, next: &Vertex, scatter: Scatter) -> ConstraintDerivatives {
     constraint_derivatives_with(prev, &prev.local(), cur, &cur.local(), next, &next.local(), scatter)
 }
 
@@ -144,15 +135,8 @@ pub fn constraint_derivatives_with(
         -g(dwi(lc.tangent_map[0]) + dwo(lc.tangent_map[0])),
         -g(dwi(lc.tangent_map[1]) + dwo(lc.tangent_map[1])),
     );
-    let i_ss = DMat2::from_cols(
-        DVec2::new(1.0 + s.x * s.x, s.x * s.y),
-        DVec2::new(s.x * s.y, 1.0 + s.y * s.y),
-    );
-    ConstraintDerivatives {
-        a,
-        b: bpos - i_ss * lc.shape,
-        c,
-    }
+    let i_ss = DMat2::from_cols(DVec2::new(1.0 + s.x * s.x, s.x * s.y), DVec2::new(s.x * s.y, 1.0 + s.y * s.y));
+    ConstraintDerivatives { a, b: bpos - i_ss * lc.shape, c }
 }
 
 /// `var(Δh) = (α/√2)² I`: the slope-space covariance of a Beckmann lobe with roughness `α`

@@ -63,12 +63,7 @@ pub struct RayCone {
 impl RayCone {
     /// A cone leaving a pinhole camera at `camera_origin` along `dir` with `w = 0`, `γ = pixel_spread`.
     pub fn new(camera_origin: DVec3, dir: DVec3, pixel_spread: f64) -> Self {
-        RayCone {
-            origin: camera_origin,
-            dir: dir.normalize_or(DVec3::Z),
-            width: 0.0,
-            spread: pixel_spread,
-        }
+        RayCone { origin: camera_origin, dir: dir.normalize_or(DVec3::Z), width: 0.0, spread: pixel_spread }
     }
 
     /// Propagates the cone to `hit` and returns the footprint there.
@@ -198,16 +193,9 @@ impl PbrtDifferentials {
             self.dp[1] = transfer(DVec3::ZERO, d, e2 * k, dist, g);
         }
         if !self.dp[0].is_finite() || !self.dp[1].is_finite() {
-            self.dp = [
-                DVec3::X * MAX_VARIANCE.sqrt(),
-                DVec3::Y * MAX_VARIANCE.sqrt(),
-            ];
+            self.dp = [DVec3::X * MAX_VARIANCE.sqrt(), DVec3::Y * MAX_VARIANCE.sqrt()];
         }
-        covariance_of_columns(
-            to_tangent(hit, self.dp[0]),
-            to_tangent(hit, self.dp[1]),
-            PIXEL_SIGMA,
-        )
+        covariance_of_columns(to_tangent(hit, self.dp[0]), to_tangent(hit, self.dp[1]), PIXEL_SIGMA)
     }
 
     /// A specular event at `hit` (after [`advance`](Self::advance) to it): the direction
@@ -230,11 +218,7 @@ impl PbrtDifferentials {
                     Scatter::Refraction { eta } => {
                         // ω_t = r d + μ n_f with n_f facing the incoming ray, r = 1/eta,
                         // c₁ = −d·n_f, c₂ = √(1 − r²(1 − c₁²)), μ = r c₁ − c₂.
-                        let (n, dn) = if d.dot(hit.n) > 0.0 {
-                            (-hit.n, -dn)
-                        } else {
-                            (hit.n, dn)
-                        };
+                        let (n, dn) = if d.dot(hit.n) > 0.0 { (-hit.n, -dn) } else { (hit.n, dn) };
                         let r = 1.0 / effective_eta(eta);
                         let c1 = -d.dot(n);
                         let c2sq = 1.0 - r * r * (1.0 - c1 * c1);
@@ -268,11 +252,7 @@ impl PbrtDifferentials {
 
     fn check(&mut self) {
         let big = |v: DVec3| !v.is_finite() || v.length_squared() > 1e16;
-        if big(self.d_dir[0])
-            || big(self.d_dir[1])
-            || big(self.d_origin[0])
-            || big(self.d_origin[1])
-        {
+        if big(self.d_dir[0]) || big(self.d_dir[1]) || big(self.d_origin[0]) || big(self.d_origin[1]) {
             self.has_differentials = false;
         }
     }

@@ -70,9 +70,7 @@ pub use constraint::{
     half_vector_variance, half_vector_variance_aniso, ConstraintDerivatives, GGX_TO_BECKMANN,
 };
 pub use estimators::{pixel_spread_angle, PbrtDifferentials, RayCone};
-pub use texture::{
-    lod, tangent_covariance, uv_covariance, world_covariance, Footprint, LOD_MAX, LOD_MIN,
-};
+pub use texture::{lod, tangent_covariance, uv_covariance, world_covariance, Footprint, LOD_MAX, LOD_MIN};
 pub use tracker::FootprintTracker;
 pub use vertex::{orthonormal_basis, LocalGeometry, Scatter, Vertex};
 

@@ -46,12 +46,7 @@ impl Svd2 {
         let r = hypot(f, g);
         let a1 = g.atan2(f);
         let a2 = h.atan2(e);
-        Svd2 {
-            phi: 0.5 * (a2 + a1),
-            theta: 0.5 * (a2 - a1),
-            s1: q + r,
-            s2: q - r,
-        }
+        Svd2 { phi: 0.5 * (a2 + a1), theta: 0.5 * (a2 - a1), s1: q + r, s2: q - r }
     }
 
     /// Largest singular value.
@@ -66,9 +61,7 @@ impl Svd2 {
 
     /// Rebuilds `R(φ) diag(s1, s2) R(θ)`.
     pub fn matrix(&self) -> DMat2 {
-        DMat2::from_angle(self.phi)
-            * DMat2::from_diagonal(DVec2::new(self.s1, self.s2))
-            * DMat2::from_angle(self.theta)
+        DMat2::from_angle(self.phi) * DMat2::from_diagonal(DVec2::new(self.s1, self.s2)) * DMat2::from_angle(self.theta)
     }
 
     /// `R(-θ) diag(f(s1), f(s2)) R(-φ)`: an inverse whose reciprocal singular values are chosen
@@ -174,28 +167,18 @@ pub struct Clamped {
 /// becomes `max_variance · I`.
 pub fn clamp_covariance(m: DMat2, max_variance: f64) -> Clamped {
     if !m.is_finite() {
-        return Clamped {
-            cov: DMat2::from_diagonal(DVec2::splat(max_variance)),
-            clamped_above: true,
-        };
+        return Clamped { cov: DMat2::from_diagonal(DVec2::splat(max_variance)), clamped_above: true };
     }
     let s = symmetrize(m);
     // Eigenvalues without the angle first: most covariances need no clamping.
     let mean = 0.5 * (s.x_axis.x + s.y_axis.y);
     let d = hypot(0.5 * (s.x_axis.x - s.y_axis.y), s.x_axis.y);
     if mean - d >= 0.0 && mean + d <= max_variance {
-        return Clamped {
-            cov: s,
-            clamped_above: false,
-        };
+        return Clamped { cov: s, clamped_above: false };
     }
     let (l1, l2, psi) = sym_eigen(s);
     Clamped {
-        cov: sym_from_eigen(
-            l1.clamp(0.0, max_variance),
-            l2.clamp(0.0, max_variance),
-            psi,
-        ),
+        cov: sym_from_eigen(l1.clamp(0.0, max_variance), l2.clamp(0.0, max_variance), psi),
         clamped_above: l1 > max_variance,
     }
 }
@@ -210,9 +193,7 @@ mod tests {
     use super::*;
 
     fn lcg(state: &mut u64) -> f64 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 
@@ -220,10 +201,8 @@ mod tests {
     fn svd_reconstructs_and_inverts() {
         let mut st = 7u64;
         for _ in 0..1000 {
-            let m = DMat2::from_cols(
-                DVec2::new(lcg(&mut st), lcg(&mut st)),
-                DVec2::new(lcg(&mut st), lcg(&mut st)),
-            ) * 3.0;
+            let m =
+                DMat2::from_cols(DVec2::new(lcg(&mut st), lcg(&mut st)), DVec2::new(lcg(&mut st), lcg(&mut st))) * 3.0;
             let svd = Svd2::new(m);
             assert!(svd.s1 >= svd.s2.abs());
             assert!((svd.matrix() - m).abs_diff_eq(DMat2::ZERO, 1e-12));
@@ -241,10 +220,8 @@ mod tests {
     fn fast_inverses_agree_with_the_decomposition() {
         let mut st = 11u64;
         for k in 0..2000 {
-            let mut m = DMat2::from_cols(
-                DVec2::new(lcg(&mut st), lcg(&mut st)),
-                DVec2::new(lcg(&mut st), lcg(&mut st)),
-            );
+            let mut m =
+                DMat2::from_cols(DVec2::new(lcg(&mut st), lcg(&mut st)), DVec2::new(lcg(&mut st), lcg(&mut st)));
             if k % 3 == 0 {
                 // Nearly singular: the slow path must be taken.
                 m.y_axis = m.x_axis * 0.5 + DVec2::splat(1e-7 * lcg(&mut st));

@@ -17,11 +17,7 @@ pub fn world_covariance(cov: DMat2, v: &Vertex) -> DMat3 {
     let (t, b) = (v.t, v.b);
     let u0 = t * cov.x_axis.x + b * cov.x_axis.y; // T Σ e₀
     let u1 = t * cov.y_axis.x + b * cov.y_axis.y; // T Σ e₁
-    DMat3::from_cols(
-        u0 * t.x + u1 * b.x,
-        u0 * t.y + u1 * b.y,
-        u0 * t.z + u1 * b.z,
-    )
+    DMat3::from_cols(u0 * t.x + u1 * b.x, u0 * t.y + u1 * b.y, u0 * t.z + u1 * b.z)
 }
 
 /// The texture-space covariance `Σ_uv = J_uv Σ J_uvᵀ` with `J_uv = ∂(u, v)/∂Δx` from
@@ -68,11 +64,7 @@ pub struct Footprint {
 impl Footprint {
     /// Gathers the boundary forms of the tangent-plane footprint `cov` at `v`.
     pub fn new(cov: DMat2, v: &Vertex) -> Self {
-        Footprint {
-            tangent: cov,
-            world: world_covariance(cov, v),
-            uv: uv_covariance(cov, v),
-        }
+        Footprint { tangent: cov, world: world_covariance(cov, v), uv: uv_covariance(cov, v) }
     }
 
     /// [`lod`] of the uv covariance.
@@ -91,8 +83,5 @@ impl Footprint {
 pub fn tangent_covariance(world: DMat3, v: &Vertex) -> DMat2 {
     let f = |a: DVec3, b: DVec3| a.dot(world * b);
     let xy = f(v.t, v.b);
-    DMat2::from_cols(
-        glam::DVec2::new(f(v.t, v.t), xy),
-        glam::DVec2::new(xy, f(v.b, v.b)),
-    )
+    DMat2::from_cols(glam::DVec2::new(f(v.t, v.t), xy), glam::DVec2::new(xy, f(v.b, v.b)))
 }

@@ -85,10 +85,7 @@ impl FootprintTracker {
 
         // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i.
         let cross = b * self.cov_p_pp * a.transpose();
-        let var_g = a * self.var_pp * a.transpose()
-            + b * self.var_p * b.transpose()
-            + cross
-            + cross.transpose();
+        let var_g = a * self.var_pp * a.transpose() + b * self.var_p * b.transpose() + cross + cross.transpose();
         // eq. (13) and eq. (16).
         let var_next = c_inv * (var_h + var_g) * c_inv.transpose();
         let cov_next = -(c_inv * (a * self.cov_p_pp.transpose() + b * self.var_p));
@@ -99,11 +96,7 @@ impl FootprintTracker {
         let clamped = clamp_covariance(var_next, MAX_VARIANCE);
         self.var_pp = self.var_p;
         self.var_p = clamped.cov;
-        self.cov_p_pp = if clamped.clamped_above {
-            DMat2::ZERO
-        } else {
-            cov_next
-        };
+        self.cov_p_pp = if clamped.clamped_above { DMat2::ZERO } else { cov_next };
         self.var_p
     }
 

@@ -47,17 +47,7 @@ impl Vertex {
     pub fn on_plane(p: DVec3, n: DVec3) -> Self {
         let n = n.normalize();
         let (t, b) = orthonormal_basis(n);
-        Vertex {
-            p,
-            n,
-            t,
-            b,
-            dpdu: t,
-            dpdv: b,
-            dndu: DVec3::ZERO,
-            dndv: DVec3::ZERO,
-            uv: DVec2::ZERO,
-        }
+        Vertex { p, n, t, b, dpdu: t, dpdv: b, dndu: DVec3::ZERO, dndv: DVec3::ZERO, uv: DVec2::ZERO }
     }
 
     /// A point without surface, such as a pinhole camera: an arbitrary frame, zero derivatives.
@@ -109,10 +99,7 @@ impl Vertex {
         // dn per unit tangent-plane offset, in (t, b) coordinates.
         let dn0 = self.dndu * j_geo.x_axis.x + self.dndv * j_geo.x_axis.y;
         let dn1 = self.dndu * j_geo.y_axis.x + self.dndv * j_geo.y_axis.y;
-        let shape = DMat2::from_cols(
-            DVec2::new(t.dot(dn0), b.dot(dn0)),
-            DVec2::new(t.dot(dn1), b.dot(dn1)),
-        );
+        let shape = DMat2::from_cols(DVec2::new(t.dot(dn0), b.dot(dn0)), DVec2::new(t.dot(dn1), b.dot(dn1)));
         let g = p0.cross(p1);
         let gl = g.length();
         let geometric_normal = if gl > 1e-12 && gl.is_finite() {
@@ -125,12 +112,7 @@ impl Vertex {
         } else {
             n
         };
-        LocalGeometry {
-            tangent_map: [p0, p1],
-            shape,
-            uv_jacobian: j_uv,
-            geometric_normal,
-        }
+        LocalGeometry { tangent_map: [p0, p1], shape, uv_jacobian: j_uv, geometric_normal }
     }
 }
 
@@ -202,17 +184,7 @@ mod tests {
         // Spherical-coordinate parameterisation, outward normal: dn = dp / R.
         let dpdu = (t * 0.3 + b * 0.8) * 1.7;
         let dpdv = t * -0.6 + b * 0.2;
-        let v = Vertex {
-            p: n * r,
-            n,
-            t,
-            b,
-            dpdu,
-            dpdv,
-            dndu: dpdu / r,
-            dndv: dpdv / r,
-            uv: DVec2::ZERO,
-        };
+        let v = Vertex { p: n * r, n, t, b, dpdu, dpdv, dndu: dpdu / r, dndv: dpdv / r, uv: DVec2::ZERO };
         let l = v.local();
         assert!((l.shape - DMat2::IDENTITY / r).abs_diff_eq(DMat2::ZERO, 1e-12));
         assert!((l.tangent_map[0] - t).length() < 1e-12);

@@ -198,7 +198,8 @@ mod tests {
 
     #[test]
     fn image_x_runs_to_the_cameras_right_and_row_zero_is_up() {
-        let cam = Camera::new(lookat(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, FovAxis::X, 200, 100, 0.01, 1e4);
+        let cam =
+            Camera::new(lookat(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y), 40.0, FovAxis::X, 200, 100, 0.01, 1e4);
         // Looking down -z with y up, the camera's right is world +x.
         let right = cam.generate_ray(Vec2::new(199.0, 50.0)).ray.d;
         assert!(right.x > 0.0);
@@ -215,7 +216,8 @@ mod tests {
 
     #[test]
     fn differentials_match_finite_differences() {
-        let cam = Camera::new(lookat(Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y), 50.0, FovAxis::Y, 64, 48, 0.01, 1e4);
+        let cam =
+            Camera::new(lookat(Vec3::new(1.0, 2.0, 3.0), Vec3::ZERO, Vec3::Y), 50.0, FovAxis::Y, 64, 48, 0.01, 1e4);
         let a = cam.generate_ray(Vec2::new(10.0, 20.0));
         let b = cam.generate_ray(Vec2::new(11.0, 20.0));
         let c = cam.generate_ray(Vec2::new(10.0, 21.0));

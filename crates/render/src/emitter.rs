@@ -231,7 +231,13 @@ impl Emitter {
             }
             Emitter::Constant { radiance } => {
                 let wi = sampling::square_to_uniform_sphere(u);
-                Some(EmitterSample { wi, dist: f32::INFINITY, value: *radiance, pdf: sampling::UNIFORM_SPHERE_PDF, delta: false })
+                Some(EmitterSample {
+                    wi,
+                    dist: f32::INFINITY,
+                    value: *radiance,
+                    pdf: sampling::UNIFORM_SPHERE_PDF,
+                    delta: false,
+                })
             }
             Emitter::Env(env) => {
                 let (wi, pdf) = env.sample(u)?;
@@ -348,7 +354,8 @@ mod tests {
     fn envmap_pdf_matches_sampling_and_integrates_to_one() {
         let (w, h) = (16, 8);
         let texels = (0..w * h).map(|i| Vec3::splat(0.1 + (i % 7) as f32)).collect();
-        let env = EnvMap::new(Arc::new(Bitmap { width: w, height: h, texels }), Mat3::from_rotation_y(0.4), 1.0).unwrap();
+        let env =
+            EnvMap::new(Arc::new(Bitmap { width: w, height: h, texels }), Mat3::from_rotation_y(0.4), 1.0).unwrap();
         let mut rng = Rng::new(4, 2);
         for _ in 0..1000 {
             let (d, pdf) = env.sample(rng.next_2d()).unwrap();

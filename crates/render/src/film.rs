@@ -69,8 +69,15 @@ impl Image {
                 buf.push((v * 255.0 + 0.5).clamp(0.0, 255.0) as u8);
             }
         }
-        image::save_buffer_with_format(tmp, &buf, self.width, self.height, image::ColorType::Rgb8, image::ImageFormat::Png)
-            .map_err(|e| Error::in_file(tmp, format!("cannot write PNG: {e}")))
+        image::save_buffer_with_format(
+            tmp,
+            &buf,
+            self.width,
+            self.height,
+            image::ColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| Error::in_file(tmp, format!("cannot write PNG: {e}")))
     }
 
     /// Reads an EXR written by [`Image::save`] or by another renderer (first RGB(A) layer).
@@ -115,7 +122,11 @@ mod tests {
         img.save(&dir.join("a.png")).unwrap();
         assert!(img.save(&dir.join("a.tiff")).is_err());
         // No temporary files are left behind.
-        let leftovers: Vec<_> = std::fs::read_dir(&dir).unwrap().filter_map(|e| e.ok()).filter(|e| e.file_name().to_string_lossy().ends_with(".tmp")).collect();
+        let leftovers: Vec<_> = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().ends_with(".tmp"))
+            .collect();
         assert!(leftovers.is_empty());
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -294,16 +294,21 @@ impl Accel {
                 order.iter().map(|&i| tris_unordered[i as usize]).collect(),
             )
         };
-        let (bounds_min, bounds_max) = if aabbs.is_empty() {
-            (Vec3::ZERO, Vec3::ZERO)
-        } else {
-            (Vec3::from(bounds.min), Vec3::from(bounds.max))
-        };
+        let (bounds_min, bounds_max) =
+            if aabbs.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (Vec3::from(bounds.min), Vec3::from(bounds.max)) };
         Accel { bvh, prims, tris, bounds_min, bounds_max }
     }
 
     #[inline]
-    fn intersect_prim(&self, shapes: &[Shape], i: usize, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, Vec2)> {
+    fn intersect_prim(
+        &self,
+        shapes: &[Shape],
+        i: usize,
+        o: Vec3,
+        d: Vec3,
+        tmin: f32,
+        tmax: f32,
+    ) -> Option<(f32, Vec2)> {
         let pr = self.prims[i];
         match &shapes[pr.shape as usize].geometry {
             ShapeGeometry::Mesh { .. } => intersect_triangle(&self.tris[i], o, d, tmin, tmax),
@@ -360,7 +365,9 @@ pub fn interaction(shapes: &[Shape], ray: &Ray, hit: &PreliminaryHit) -> Surface
     let mut si = match &shape.geometry {
         ShapeGeometry::Mesh { mesh, .. } => mesh_interaction(mesh, hit, shape.face_normals),
         ShapeGeometry::Sphere { center, radius, rotation } => sphere_interaction(*center, *radius, rotation, p_ray),
-        ShapeGeometry::Disk { to_world, to_object, normal, .. } => disk_interaction(to_world, to_object, *normal, p_ray),
+        ShapeGeometry::Disk { to_world, to_object, normal, .. } => {
+            disk_interaction(to_world, to_object, *normal, p_ray)
+        }
     };
     si.t = hit.t;
     si.shape = hit.shape;
@@ -412,8 +419,7 @@ fn mesh_interaction(mesh: &TriangleMesh, hit: &PreliminaryHit, face_normals: boo
     };
     let uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
     let (duv1, duv2) = (uv1 - uv0, uv2 - uv0);
-    let (dpdu, dpdv) =
-        uv_derivatives(duv1, duv2, p1 - p0, p2 - p0).unwrap_or_else(|| (p1 - p0, p2 - p0));
+    let (dpdu, dpdv) = uv_derivatives(duv1, duv2, p1 - p0, p2 - p0).unwrap_or_else(|| (p1 - p0, p2 - p0));
     let mut si = empty_interaction(p, ng);
     si.uv = uv;
     si.dpdu = dpdu;

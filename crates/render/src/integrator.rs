@@ -9,8 +9,8 @@ use crate::camera::CameraRay;
 use crate::film::Image;
 use crate::geometry::{interaction, Ray, SurfaceInteraction};
 use crate::math::{max_component, Spectrum};
-use crate::sampling::Rng;
 use crate::pathfootprint::{vertex_of, FootprintMode, PathFootprint};
+use crate::sampling::Rng;
 use crate::scene::Scene;
 use footprint::Vertex;
 use glam::{DMat2, Vec2, Vec3};
@@ -188,14 +188,22 @@ impl PathObserver for LodObserver {
 }
 
 /// A pixel's radiance and, when asked for, its footprint AOV value.
-fn render_pixel_aov(scene: &Scene, settings: RenderSettings, x: u32, y: u32, counts: &mut RenderCounts) -> (Spectrum, Spectrum) {
+fn render_pixel_aov(
+    scene: &Scene,
+    settings: RenderSettings,
+    x: u32,
+    y: u32,
+    counts: &mut RenderCounts,
+) -> (Spectrum, Spectrum) {
     let Some(density) = settings.footprint_aov_density else {
         return (render_pixel(scene, settings, x, y, counts), Spectrum::ZERO);
     };
     let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
     let l = render_pixel_with(scene, settings, x, y, counts, &mut obs);
     let lods: [f32; AOV_BOUNCES] =
-        std::array::from_fn(|k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX });
+        std::array::from_fn(
+            |k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX },
+        );
     (l, Spectrum::from_array(lods))
 }
 
@@ -292,7 +300,11 @@ pub fn radiance<O: PathObserver>(
             for &ei in &scene.infinite {
                 let e = &scene.emitters[ei as usize];
                 let le = e.eval_escape(ray.d);
-                let w = if prev_delta { 1.0 } else { mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, Vec3::ZERO, Vec3::ZERO, ray.d)) };
+                let w = if prev_delta {
+                    1.0
+                } else {
+                    mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, Vec3::ZERO, Vec3::ZERO, ray.d))
+                };
                 result += throughput * le * w;
             }
             obs.escape(depth, ray.d);
@@ -315,7 +327,11 @@ pub fn radiance<O: PathObserver>(
             let e = &scene.emitters[ei as usize];
             if let crate::emitter::Emitter::Area { radiance, .. } = e {
                 if si.sh.n.dot(-ray.d) > 0.0 {
-                    let w = if prev_delta { 1.0 } else { mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, si.p, si.sh.n, ray.d)) };
+                    let w = if prev_delta {
+                        1.0
+                    } else {
+                        mis(prev_pdf, select_pdf * e.pdf(&scene.shapes, prev_p, si.p, si.sh.n, ray.d))
+                    };
                     result += throughput * *radiance * w;
                 }
             }

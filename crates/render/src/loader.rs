@@ -6,7 +6,7 @@
 
 use crate::bsdf::{conductor_preset, BsdfDesc, MicrofacetKind};
 use crate::camera::{Camera, FovAxis, Rfilter};
-use crate::emitter::{EnvMap, Emitter};
+use crate::emitter::{Emitter, EnvMap};
 use crate::error::Result;
 use crate::geometry::{mesh_area_distribution, Accel, Shape, ShapeGeometry};
 use crate::mesh::TriangleMesh;
@@ -128,7 +128,8 @@ impl Builder {
             eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
         }
         let accel = Accel::build(&self.shapes);
-        let infinite = self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();
+        let infinite =
+            self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();
         Ok(Scene {
             shapes: self.shapes,
             accel,
@@ -172,9 +173,11 @@ impl Builder {
         let fov = match (obj.opt_float("fov")?, obj.opt_string("focal_length")?) {
             (Some(f), None) => f,
             (None, Some(fl)) => {
-                let mm: f32 = fl.trim_end_matches("mm").trim().parse().map_err(|_| {
-                    obj.error(format!("focal_length must be like '50mm', got '{fl}'"))
-                })?;
+                let mm: f32 = fl
+                    .trim_end_matches("mm")
+                    .trim()
+                    .parse()
+                    .map_err(|_| obj.error(format!("focal_length must be like '50mm', got '{fl}'")))?;
                 2.0 * (36.0f32 / (2.0 * mm)).atan().to_degrees()
             }
             (None, None) => 2.0 * (36.0f32 / 100.0).atan().to_degrees(),
@@ -189,7 +192,9 @@ impl Builder {
             "diagonal" => FovAxis::Diagonal,
             "smaller" => FovAxis::Smaller,
             "larger" => FovAxis::Larger,
-            other => return Err(obj.error(format!("fov_axis must be x, y, diagonal, smaller or larger, got '{other}'"))),
+            other => {
+                return Err(obj.error(format!("fov_axis must be x, y, diagonal, smaller or larger, got '{other}'")))
+            }
         };
         let near = obj.float("near_clip", 1e-2)?;
         let far = obj.float("far_clip", 1e4)?;
@@ -236,8 +241,12 @@ impl Builder {
             [f] => {
                 let r = match f.plugin.as_str() {
                     "box" => Rfilter::Box,
-                    "gaussian" => Rfilter::Gaussian { stddev: check_finite_positive(f, "stddev", f.float("stddev", 0.5)?, false)? },
-                    "tent" => Rfilter::Tent { radius: check_finite_positive(f, "radius", f.float("radius", 1.0)?, false)? },
+                    "gaussian" => Rfilter::Gaussian {
+                        stddev: check_finite_positive(f, "stddev", f.float("stddev", 0.5)?, false)?,
+                    },
+                    "tent" => {
+                        Rfilter::Tent { radius: check_finite_positive(f, "radius", f.float("radius", 1.0)?, false)? }
+                    }
                     other => return Err(f.error(format!("unknown rfilter '{other}' (supported: box, gaussian, tent)"))),
                 };
                 f.check_unused()?;
@@ -318,7 +327,10 @@ impl Builder {
     fn texture_param(&mut self, obj: &Object, name: &str, default: Vec3) -> Result<Texture> {
         if let Some(child) = obj.child_named(name) {
             if child.tag != "texture" {
-                return Err(child.error(format!("parameter '{name}' must be a colour, a float or a <texture>, found <{}>", child.tag)));
+                return Err(child.error(format!(
+                    "parameter '{name}' must be a colour, a float or a <texture>, found <{}>",
+                    child.tag
+                )));
             }
             return self.texture(&child);
         }
@@ -331,7 +343,11 @@ impl Builder {
             Ok(None) => default,
             Err(_) => {
                 let s = obj.string(name, "")?;
-                crate::bsdf::dielectric_ior_preset(&s).ok_or_else(|| obj.error(format!("unknown material '{s}' for '{name}' (give a number or a name such as bk7, water, air)")))?
+                crate::bsdf::dielectric_ior_preset(&s).ok_or_else(|| {
+                    obj.error(format!(
+                        "unknown material '{s}' for '{name}' (give a number or a name such as bk7, water, air)"
+                    ))
+                })?
             }
         };
         check_finite_positive(obj, name, v, false)
@@ -342,7 +358,9 @@ impl Builder {
         let kind = match obj.string("distribution", "beckmann")?.as_str() {
             "beckmann" => MicrofacetKind::Beckmann,
             "ggx" => MicrofacetKind::Ggx,
-            other => return Err(obj.error_at("distribution", format!("distribution must be beckmann or ggx, got '{other}'"))),
+            other => {
+                return Err(obj.error_at("distribution", format!("distribution must be beckmann or ggx, got '{other}'")))
+            }
         };
         let _ = obj.bool("sample_visible", true)?;
         let (au, av) = if obj.has("alpha_u") || obj.has("alpha_v") {
@@ -356,7 +374,10 @@ impl Builder {
         };
         for (name, a) in [("alpha", au), ("alpha_v", av)] {
             if !(a.is_finite() && a > 0.0) {
-                return Err(obj.error_at(if obj.has(name) { name } else { "alpha_u" }, format!("roughness alpha must be a finite positive number, got {a}")));
+                return Err(obj.error_at(
+                    if obj.has(name) { name } else { "alpha_u" },
+                    format!("roughness alpha must be a finite positive number, got {a}"),
+                ));
             }
         }
         Ok((kind, au.max(1e-4), av.max(1e-4)))
@@ -471,7 +492,9 @@ impl Builder {
             "rectangle" => mesh_geometry(obj, rectangle_mesh(), to_world)?,
             "cube" => mesh_geometry(obj, cube_mesh(), to_world)?,
             "obj" | "ply" => {
-                let file = obj.opt_string("filename")?.ok_or_else(|| obj.error(format!("{} needs a 'filename'", obj.plugin)))?;
+                let file = obj
+                    .opt_string("filename")?
+                    .ok_or_else(|| obj.error(format!("{} needs a 'filename'", obj.plugin)))?;
                 let path = self.resolve(&file);
                 if !path.exists() {
                     return Err(obj.error(format!("mesh file '{}' not found", path.display())));
@@ -513,7 +536,9 @@ impl Builder {
                 ShapeGeometry::Disk { to_world: tw, to_object: tw.inverse(), normal, area }
             }
             other => {
-                return Err(obj.error(format!("unknown shape '{other}' (supported: rectangle, disk, cube, sphere, obj, ply)")))
+                return Err(
+                    obj.error(format!("unknown shape '{other}' (supported: rectangle, disk, cube, sphere, obj, ply)"))
+                )
             }
         };
         let material = match obj.children("bsdf").as_slice() {
@@ -563,7 +588,8 @@ impl Builder {
                 let lin = Mat3::from_mat4(to_world);
                 let rot = Mat3::from_cols(lin.x_axis.normalize(), lin.y_axis.normalize(), lin.z_axis.normalize());
                 let bitmap = self.bitmap(obj, &file, false)?;
-                let env = EnvMap::new(bitmap, rot, scale).ok_or_else(|| obj.error("envmap image is black everywhere"))?;
+                let env =
+                    EnvMap::new(bitmap, rot, scale).ok_or_else(|| obj.error("envmap image is black everywhere"))?;
                 Emitter::Env(Box::new(env))
             }
             "directional" => {
@@ -575,11 +601,16 @@ impl Builder {
                 if direction == Vec3::ZERO || !direction.is_finite() {
                     return Err(obj.error("directional emitter needs a non-zero direction"));
                 }
-                Emitter::Directional { direction, irradiance: check_rgb(obj, "irradiance", obj.rgb("irradiance", Vec3::ONE)?)? }
+                Emitter::Directional {
+                    direction,
+                    irradiance: check_rgb(obj, "irradiance", obj.rgb("irradiance", Vec3::ONE)?)?,
+                }
             }
             "area" => return Err(obj.error("an area emitter must be nested in a <shape>")),
             other => {
-                return Err(obj.error(format!("unknown emitter '{other}' (supported: area, point, constant, envmap, directional)")))
+                return Err(obj.error(format!(
+                    "unknown emitter '{other}' (supported: area, point, constant, envmap, directional)"
+                )))
             }
         };
         obj.check_unused()?;
@@ -605,7 +636,12 @@ fn mesh_geometry(obj: &Object, mut mesh: TriangleMesh, to_world: Mat4) -> Result
 /// Mitsuba's `rectangle`: [−1, 1]² in the xy plane, normal +z, uv = ((x+1)/2, (y+1)/2).
 pub fn rectangle_mesh() -> TriangleMesh {
     TriangleMesh {
-        positions: vec![Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(-1.0, 1.0, 0.0)],
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
         normals: None,
         uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
         indices: vec![[0, 1, 2], [0, 2, 3]],

@@ -43,10 +43,7 @@ impl TriangleMesh {
         }
         if let Some(normals) = &self.normals {
             if normals.len() != n {
-                return Err(Error::in_file(
-                    path,
-                    format!("mesh has {} normals for {n} vertices", normals.len()),
-                ));
+                return Err(Error::in_file(path, format!("mesh has {} normals for {n} vertices", normals.len())));
             }
         }
         if let Some(uvs) = &self.uvs {
@@ -66,25 +63,16 @@ impl TriangleMesh {
             }
         }
         if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
-            return Err(Error::in_file(
-                path,
-                format!("vertex {i} has a non-finite position {}", self.positions[i]),
-            ));
+            return Err(Error::in_file(path, format!("vertex {i} has a non-finite position {}", self.positions[i])));
         }
         if let Some(normals) = &self.normals {
             if let Some(i) = normals.iter().position(|v| !v.is_finite()) {
-                return Err(Error::in_file(
-                    path,
-                    format!("vertex {i} has a non-finite normal {}", normals[i]),
-                ));
+                return Err(Error::in_file(path, format!("vertex {i} has a non-finite normal {}", normals[i])));
             }
         }
         if let Some(uvs) = &self.uvs {
             if let Some(i) = uvs.iter().position(|v| !v.is_finite()) {
-                return Err(Error::in_file(
-                    path,
-                    format!("vertex {i} has non-finite texture coordinates {}", uvs[i]),
-                ));
+                return Err(Error::in_file(path, format!("vertex {i} has non-finite texture coordinates {}", uvs[i])));
             }
         }
 
@@ -184,9 +172,7 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
                         let kind = ["vertex (v)", "texture coordinate (vt)", "normal (vn)"][slot];
                         return Some((
                             ln as u32 + 1,
-                            format!(
-                                "face refers to {kind} {x}, but only {count} are defined before this line"
-                            ),
+                            format!("face refers to {kind} {x}, but only {count} are defined before this line"),
                         ));
                     }
                 }
@@ -201,8 +187,7 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
 /// fan-triangulated; each distinct `v/vt/vn` corner becomes one vertex. All groups/objects are
 /// merged; materials are ignored. `flip_tex_coords` maps v to 1 − v (Mitsuba's default for OBJ).
 pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
-    let bytes = std::fs::read(path)
-        .map_err(|e| Error::in_file(path, format!("cannot read OBJ file: {e}")))?;
+    let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot read OBJ file: {e}")))?;
     let mut reader = LineReader { data: &bytes, pos: 0, line_start: 0 };
     // tobj's other fields depend on its cargo features, hence the (possibly no-op) update.
     #[allow(clippy::needless_update)]
@@ -240,26 +225,20 @@ pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
         mesh.positions.extend(m.positions.chunks_exact(3).map(|p| Vec3::new(p[0], p[1], p[2])));
         if has_uv {
             with_uv += 1;
-            uvs.extend(m.texcoords.chunks_exact(2).map(|t| {
-                Vec2::new(t[0], if flip_tex_coords { 1.0 - t[1] } else { t[1] })
-            }));
+            uvs.extend(
+                m.texcoords.chunks_exact(2).map(|t| Vec2::new(t[0], if flip_tex_coords { 1.0 - t[1] } else { t[1] })),
+            );
         }
         if has_n {
             with_n += 1;
             normals.extend(m.normals.chunks_exact(3).map(|n| Vec3::new(n[0], n[1], n[2])));
         }
-        let base = u32::try_from(base)
-            .map_err(|_| Error::in_file(path, "mesh has more than 2^32 vertices"))?;
-        mesh.indices.extend(
-            m.indices.chunks_exact(3).map(|t| [t[0] + base, t[1] + base, t[2] + base]),
-        );
+        let base = u32::try_from(base).map_err(|_| Error::in_file(path, "mesh has more than 2^32 vertices"))?;
+        mesh.indices.extend(m.indices.chunks_exact(3).map(|t| [t[0] + base, t[1] + base, t[2] + base]));
     }
     let groups = models.len();
     if (with_uv != 0 && with_uv != groups) || (with_n != 0 && with_n != groups) {
-        return Err(Error::in_file(
-            path,
-            "some objects/groups have texture coordinates or normals and others do not",
-        ));
+        return Err(Error::in_file(path, "some objects/groups have texture coordinates or normals and others do not"));
     }
     if with_uv > 0 {
         mesh.uvs = Some(uvs);
@@ -375,12 +354,12 @@ fn ply_error(path: &Path, e: ParseError) -> Error {
         Some(l) => msg.strip_prefix(&format!("Line {l}: ")).unwrap_or(&msg).to_string(),
         None => msg,
     };
-    let msg = format!("invalid PLY file: {}", msg.replace("\r\n'", "'").replace("\n'", "'").replace("\n\t", "; ").replace('\n', "; "));
+    let msg = format!(
+        "invalid PLY file: {}",
+        msg.replace("\r\n'", "'").replace("\n'", "'").replace("\n\t", "; ").replace('\n', "; ")
+    );
     match e.line() {
-        Some(line) => Error::at(
-            &Loc::new(std::sync::Arc::new(path.to_path_buf()), line as u32, 0),
-            msg,
-        ),
+        Some(line) => Error::at(&Loc::new(std::sync::Arc::new(path.to_path_buf()), line as u32, 0), msg),
         None => Error::in_file(path, msg),
     }
 }
@@ -391,23 +370,19 @@ fn ply_error(path: &Path, e: ParseError) -> Error {
 /// type; polygons are fan-triangulated. Other elements and properties are skipped.
 /// `flip_tex_coords` maps v to 1 − v (Mitsuba's default for PLY is not to).
 pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
-    let file = std::fs::File::open(path)
-        .map_err(|e| Error::in_file(path, format!("cannot read PLY file: {e}")))?;
+    let file = std::fs::File::open(path).map_err(|e| Error::in_file(path, format!("cannot read PLY file: {e}")))?;
     let mut reader = Reader::new(BufReader::new(file));
     let header = Parser::<PlySkip>::new().read_header(&mut reader).map_err(|e| ply_error(path, e))?;
 
-    let vertex_def = header
-        .elements
-        .get("vertex")
-        .ok_or_else(|| Error::in_file(path, "PLY file has no 'vertex' element"))?;
+    let vertex_def =
+        header.elements.get("vertex").ok_or_else(|| Error::in_file(path, "PLY file has no 'vertex' element"))?;
     let has = |names: &[&str]| names.iter().all(|n| vertex_def.properties.contains_key(*n));
     if !has(&["x", "y", "z"]) {
         return Err(Error::in_file(path, "PLY 'vertex' element lacks x, y, z properties"));
     }
     let has_normals = has(&["nx", "ny", "nz"]);
-    let has_uv = [["u", "v"], ["s", "t"], ["texture_u", "texture_v"], ["texture_s", "texture_t"]]
-        .iter()
-        .any(|pair| has(pair));
+    let has_uv =
+        [["u", "v"], ["s", "t"], ["texture_u", "texture_v"], ["texture_s", "texture_t"]].iter().any(|pair| has(pair));
     if let Some(face) = header.elements.get("face") {
         if !face.properties.contains_key("vertex_indices") && !face.properties.contains_key("vertex_index") {
             return Err(Error::in_file(path, "PLY 'face' element lacks a 'vertex_indices' list"));
@@ -461,10 +436,7 @@ pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
         positions: vertices.iter().map(|v| Vec3::from(v.p)).collect(),
         normals: has_normals.then(|| vertices.iter().map(|v| Vec3::from(v.n)).collect()),
         uvs: has_uv.then(|| {
-            vertices
-                .iter()
-                .map(|v| Vec2::new(v.uv[0], if flip_tex_coords { 1.0 - v.uv[1] } else { v.uv[1] }))
-                .collect()
+            vertices.iter().map(|v| Vec2::new(v.uv[0], if flip_tex_coords { 1.0 - v.uv[1] } else { v.uv[1] })).collect()
         }),
         indices,
     })

@@ -143,11 +143,7 @@ pub struct Object {
 impl Object {
     /// `bsdf 'diffuse' (id 'white')`, for messages.
     pub fn describe(&self) -> String {
-        let mut s = if self.tag == "scene" {
-            "scene".to_string()
-        } else {
-            format!("{} '{}'", self.tag, self.plugin)
-        };
+        let mut s = if self.tag == "scene" { "scene".to_string() } else { format!("{} '{}'", self.tag, self.plugin) };
         if let Some(id) = &self.id {
             s.push_str(&format!(" (id '{id}')"));
         }
@@ -193,8 +189,7 @@ impl Object {
 
     /// Whether a parameter or a named nested object `name` is present (does not mark it used).
     pub fn has(&self, name: &str) -> bool {
-        self.params.iter().any(|p| p.name == name)
-            || self.children.iter().any(|c| c.name.as_deref() == Some(name))
+        self.params.iter().any(|p| p.name == name) || self.children.iter().any(|c| c.name.as_deref() == Some(name))
     }
 
     /// Finds parameter `name` and marks it used. A nested object of that name is not a
@@ -206,10 +201,7 @@ impl Object {
     }
 
     fn type_error(p: &Param, expected: &str) -> Error {
-        Error::at(
-            &p.loc,
-            format!("parameter '{}' must be {expected}, found {}", p.name, p.value.kind()),
-        )
+        Error::at(&p.loc, format!("parameter '{}' must be {expected}, found {}", p.name, p.value.kind()))
     }
 
     /// Float parameter `name` (an `<integer>` is accepted too), or `default`.
@@ -367,11 +359,7 @@ impl Object {
             if c.used.get() || (!c.via_ref && c.object.referenced.get()) {
                 continue;
             }
-            let what = if c.via_ref {
-                format!("reference to {}", c.object.describe())
-            } else {
-                c.object.describe()
-            };
+            let what = if c.via_ref { format!("reference to {}", c.object.describe()) } else { c.object.describe() };
             let msg = match &c.name {
                 Some(n) => format!("unused {what} (as '{n}') in {me}"),
                 None => format!("unused {what} in {me}"),
@@ -409,8 +397,8 @@ impl Object {
 /// Parses the scene file at `path`. `defines` are `-D name=value` pairs from the command line:
 /// they override the scene's `<default>`s.
 pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::in_file(path, format!("cannot read scene file: {e}")))?;
+    let text =
+        std::fs::read_to_string(path).map_err(|e| Error::in_file(path, format!("cannot read scene file: {e}")))?;
     parse_str(&text, path, defines)
 }
 
@@ -419,17 +407,10 @@ pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object
 pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
     for (name, _) in defines {
         if name.is_empty() || !name.chars().all(is_var_char) {
-            return Err(Error::plain(format!(
-                "invalid define name '{name}': use letters, digits and '_' only"
-            )));
+            return Err(Error::plain(format!("invalid define name '{name}': use letters, digits and '_' only")));
         }
     }
-    let mut parser = Parser {
-        defines: defines.to_vec(),
-        defaults: Vec::new(),
-        ids: HashMap::new(),
-        include_depth: 0,
-    };
+    let mut parser = Parser { defines: defines.to_vec(), defaults: Vec::new(), ids: HashMap::new(), include_depth: 0 };
     let file = Arc::new(virtual_path.to_path_buf());
     let doc = parse_xml(text, &file)?;
     let root = doc.root_element();
@@ -532,10 +513,7 @@ impl Elem {
 
     fn require(&self, name: &str, example: &str) -> Result<&Attr> {
         self.get(name).ok_or_else(|| {
-            Error::at(
-                &self.loc,
-                format!("<{}> requires a '{name}' attribute (e.g. {example})", self.tag),
-            )
+            Error::at(&self.loc, format!("<{}> requires a '{name}' attribute (e.g. {example})", self.tag))
         })
     }
 
@@ -544,12 +522,7 @@ impl Elem {
             if !allowed.contains(&a.name.as_str()) {
                 return Err(Error::at(
                     &a.loc,
-                    format!(
-                        "unexpected attribute '{}' on <{}> (allowed: {})",
-                        a.name,
-                        self.tag,
-                        allowed.join(", ")
-                    ),
+                    format!("unexpected attribute '{}' on <{}> (allowed: {})", a.name, self.tag, allowed.join(", ")),
                 ));
             }
         }
@@ -624,10 +597,7 @@ fn parse_list(attr: &Attr, tag: &str, counts: &[usize]) -> Result<Vec<f32>> {
 fn parse_xyz(e: &Elem, default: f32) -> Result<Vec3> {
     if let Some(v) = e.get("value") {
         if let Some(a) = ["x", "y", "z"].iter().find_map(|n| e.get(n)) {
-            return Err(Error::at(
-                &a.loc,
-                format!("<{}> cannot mix 'value' with 'x'/'y'/'z' attributes", e.tag),
-            ));
+            return Err(Error::at(&a.loc, format!("<{}> cannot mix 'value' with 'x'/'y'/'z' attributes", e.tag)));
         }
         let l = parse_list(v, &e.tag, &[1, 3])?;
         return Ok(if l.len() == 1 { Vec3::splat(l[0]) } else { Vec3::new(l[0], l[1], l[2]) });
@@ -658,10 +628,9 @@ impl Builder {
             .map(|p| &p.loc)
             .or_else(|| self.children.iter().find(|c| c.name.as_deref() == Some(name)).map(|c| &c.loc));
         match prev {
-            Some(prev) => Err(Error::at(
-                loc,
-                format!("parameter '{name}' is specified more than once (first at {prev})"),
-            )),
+            Some(prev) => {
+                Err(Error::at(loc, format!("parameter '{name}' is specified more than once (first at {prev})")))
+            }
             None => Ok(()),
         }
     }
@@ -693,11 +662,7 @@ struct Parser {
 
 impl Parser {
     fn variable(&self, name: &str) -> Option<&str> {
-        self.defines
-            .iter()
-            .chain(self.defaults.iter())
-            .find(|(n, _)| n == name)
-            .map(|(_, v)| v.as_str())
+        self.defines.iter().chain(self.defaults.iter()).find(|(n, _)| n == name).map(|(_, v)| v.as_str())
     }
 
     /// Replaces `$name` by the value of variable `name`.
@@ -713,10 +678,7 @@ impl Parser {
             let len = after.find(|c: char| !is_var_char(c)).unwrap_or(after.len());
             let name = &after[..len];
             if name.is_empty() {
-                return Err(Error::at(
-                    loc,
-                    format!("'$' not followed by a variable name in \"{s}\""),
-                ));
+                return Err(Error::at(loc, format!("'$' not followed by a variable name in \"{s}\"")));
             }
             match self.variable(name) {
                 Some(v) => out.push_str(v),
@@ -916,9 +878,8 @@ impl Parser {
                 path = dir.join(path);
             }
         }
-        let text = std::fs::read_to_string(&path).map_err(|err| {
-            Error::at(&f.loc, format!("cannot read included file '{}': {err}", path.display()))
-        })?;
+        let text = std::fs::read_to_string(&path)
+            .map_err(|err| Error::at(&f.loc, format!("cannot read included file '{}': {err}", path.display())))?;
         let file = Arc::new(path);
         let doc = parse_xml(&text, &file)?;
         let root = doc.root_element();
@@ -1002,7 +963,10 @@ impl Parser {
                     _ => {
                         return Err(Error::at(
                             &a.loc,
-                            format!("invalid boolean '{}' for parameter '{name}' (expected \"true\" or \"false\")", a.value),
+                            format!(
+                                "invalid boolean '{}' for parameter '{name}' (expected \"true\" or \"false\")",
+                                a.value
+                            ),
                         ));
                     }
                 }
@@ -1093,7 +1057,10 @@ impl Parser {
                     if is_singular(&mat) {
                         return Err(Error::at(
                             &a.loc,
-                            format!("<matrix> is singular (determinant {:e}); it cannot place an object", mat.determinant()),
+                            format!(
+                                "<matrix> is singular (determinant {:e}); it cannot place an object",
+                                mat.determinant()
+                            ),
                         ));
                     }
                     mat
@@ -1303,20 +1270,26 @@ mod tests {
     #[test]
     fn xml_lookat_errors() {
         expect_err(
-            &scene(r#"<sensor type="perspective"><transform name="to_world">
-                <lookat origin="0, 0, 0" target="0, 5, 0" up="0, 1, 0"/></transform></sensor>"#),
+            &scene(
+                r#"<sensor type="perspective"><transform name="to_world">
+                <lookat origin="0, 0, 0" target="0, 5, 0" up="0, 1, 0"/></transform></sensor>"#,
+            ),
             3,
             &["parallel"],
         );
         expect_err(
-            &scene(r#"<sensor type="perspective"><transform name="to_world">
-                <lookat origin="1, 1, 1" target="1, 1, 1" up="0, 1, 0"/></transform></sensor>"#),
+            &scene(
+                r#"<sensor type="perspective"><transform name="to_world">
+                <lookat origin="1, 1, 1" target="1, 1, 1" up="0, 1, 0"/></transform></sensor>"#,
+            ),
             3,
             &["same point"],
         );
         expect_err(
-            &scene(r#"<sensor type="perspective"><transform name="to_world">
-                <lookat origin="1, 1" target="1, 1, 0"/></transform></sensor>"#),
+            &scene(
+                r#"<sensor type="perspective"><transform name="to_world">
+                <lookat origin="1, 1" target="1, 1, 0"/></transform></sensor>"#,
+            ),
             3,
             &["'origin'", "3 number"],
         );
@@ -1362,7 +1335,10 @@ mod tests {
         let e = b.int("alpha", 0).unwrap_err().to_string();
         assert!(e.starts_with("test.xml:3:") && e.contains("parameter 'alpha' must be an integer, found float"), "{e}");
         let e = b.float("distribution", 0.0).unwrap_err().to_string();
-        assert!(e.starts_with("test.xml:6:") && e.contains("parameter 'distribution' must be a float, found string"), "{e}");
+        assert!(
+            e.starts_with("test.xml:6:") && e.contains("parameter 'distribution' must be a float, found string"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -1385,7 +1361,10 @@ mod tests {
         assert!(e.contains("unused parameter 'foo' in bsdf 'diffuse'"), "{e}");
         b.float("foo", 0.0).unwrap();
         let e = b.check_unused().unwrap_err().to_string();
-        assert!(e.starts_with("test.xml:5:") && e.contains("unused texture 'bitmap' (as 'bar') in bsdf 'diffuse'"), "{e}");
+        assert!(
+            e.starts_with("test.xml:5:") && e.contains("unused texture 'bitmap' (as 'bar') in bsdf 'diffuse'"),
+            "{e}"
+        );
         let t = b.child_named("bar").unwrap();
         b.check_unused().unwrap();
         // The tree check goes into the texture, whose filename is still unread.
@@ -1508,7 +1487,10 @@ mod tests {
             (r#"<point name="a" value="1, 2, 3" x="1"/>"#, &["cannot mix"]),
             (r#"<float value="1"/>"#, &["<float> requires a 'name' attribute"]),
             (r#"<float name="a"/>"#, &["<float> requires a 'value' attribute"]),
-            (r#"<float name="a" value="1" unit="m"/>"#, &["unexpected attribute 'unit' on <float>", "allowed: name, value"]),
+            (
+                r#"<float name="a" value="1" unit="m"/>"#,
+                &["unexpected attribute 'unit' on <float>", "allowed: name, value"],
+            ),
             (r#"<floot name="a" value="1"/>"#, &["unknown tag <floot>"]),
             (r#"<translate x="1"/>"#, &["<translate> can only appear inside a <transform"]),
             (r#"<bsdf id="x"/>"#, &["<bsdf> requires a 'type' attribute"]),

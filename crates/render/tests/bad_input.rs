@@ -37,7 +37,10 @@ fn malformed_xml() {
 
 #[test]
 fn unknown_plugins() {
-    assert_mentions(&load_err("unknown_shape", r#"<shape type="teapot"/>"#), &["unknown_shape.xml:4", "teapot", "sphere"]);
+    assert_mentions(
+        &load_err("unknown_shape", r#"<shape type="teapot"/>"#),
+        &["unknown_shape.xml:4", "teapot", "sphere"],
+    );
     assert_mentions(&load_err("unknown_bsdf", r#"<shape type="sphere"><bsdf type="velvet"/></shape>"#), &["velvet"]);
     assert_mentions(&load_err("unknown_emitter", r#"<emitter type="spot"/>"#), &["spot"]);
 }
@@ -71,14 +74,26 @@ fn missing_files() {
 
 #[test]
 fn nan_and_negative_parameters() {
-    assert_mentions(&load_err("nan_radius", r#"<shape type="sphere"><float name="radius" value="nan"/></shape>"#), &["nan_radius.xml:4"]);
-    assert_mentions(&load_err("neg_radius", r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#), &["neg_radius.xml:4", "radius"]);
     assert_mentions(
-        &load_err("neg_reflectance", r#"<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="-0.5"/></bsdf></shape>"#),
+        &load_err("nan_radius", r#"<shape type="sphere"><float name="radius" value="nan"/></shape>"#),
+        &["nan_radius.xml:4"],
+    );
+    assert_mentions(
+        &load_err("neg_radius", r#"<shape type="sphere"><float name="radius" value="-1"/></shape>"#),
+        &["neg_radius.xml:4", "radius"],
+    );
+    assert_mentions(
+        &load_err(
+            "neg_reflectance",
+            r#"<shape type="sphere"><bsdf type="diffuse"><rgb name="reflectance" value="-0.5"/></bsdf></shape>"#,
+        ),
         &["neg_reflectance.xml:4", "reflectance"],
     );
     assert_mentions(
-        &load_err("neg_alpha", r#"<shape type="sphere"><bsdf type="roughconductor"><float name="alpha" value="-0.1"/></bsdf></shape>"#),
+        &load_err(
+            "neg_alpha",
+            r#"<shape type="sphere"><bsdf type="roughconductor"><float name="alpha" value="-0.1"/></bsdf></shape>"#,
+        ),
         &["neg_alpha.xml:4", "alpha"],
     );
 }
@@ -86,7 +101,10 @@ fn nan_and_negative_parameters() {
 #[test]
 fn singular_transform() {
     assert_mentions(
-        &load_err("singular", r#"<shape type="rectangle"><transform name="to_world"><scale x="0"/></transform></shape>"#),
+        &load_err(
+            "singular",
+            r#"<shape type="rectangle"><transform name="to_world"><scale x="0"/></transform></shape>"#,
+        ),
         &["singular.xml:4"],
     );
 }
@@ -95,7 +113,10 @@ fn singular_transform() {
 fn degenerate_mesh() {
     let obj = dir().join("flat.obj");
     std::fs::write(&obj, "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
-    let e = load_err("degenerate", &format!(r#"<shape type="obj"><string name="filename" value="{}"/></shape>"#, obj.display()));
+    let e = load_err(
+        "degenerate",
+        &format!(r#"<shape type="obj"><string name="filename" value="{}"/></shape>"#, obj.display()),
+    );
     assert_mentions(&e, &["flat.obj"]);
 }
 

@@ -22,7 +22,11 @@ fn block_rel_mse(a: &Image, r: &Image) -> f64 {
     for y in 0..h {
         for x in 0..w {
             let avg = |img: &Image| {
-                (img.get(2 * x, 2 * y) + img.get(2 * x + 1, 2 * y) + img.get(2 * x, 2 * y + 1) + img.get(2 * x + 1, 2 * y + 1)) * 0.25
+                (img.get(2 * x, 2 * y)
+                    + img.get(2 * x + 1, 2 * y)
+                    + img.get(2 * x, 2 * y + 1)
+                    + img.get(2 * x + 1, 2 * y + 1))
+                    * 0.25
             };
             let (pa, pr) = (avg(a), avg(r));
             for c in 0..3 {
@@ -51,7 +55,10 @@ fn check_scene(name: &str, spp: u32) {
     let noise = block_rel_mse(&a, &b) / 2.0;
     let err_c = block_rel_mse(&c, &reference);
     let mean_err = 0.5 * (err_a + err_b);
-    eprintln!("{name}: relMSE vs Mitsuba {mean_err:.3e} at {spp} spp (noise alone {noise:.3e}), {err_c:.3e} at {} spp", 4 * spp);
+    eprintln!(
+        "{name}: relMSE vs Mitsuba {mean_err:.3e} at {spp} spp (noise alone {noise:.3e}), {err_c:.3e} at {} spp",
+        4 * spp
+    );
     assert!(mean_err < 1.5 * noise + 2e-4, "{name}: error {mean_err:.3e} is more than noise ({noise:.3e}) explains");
     assert!(err_c < 0.5 * mean_err, "{name}: error does not fall with spp ({mean_err:.3e} -> {err_c:.3e})");
 }

@@ -134,7 +134,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
     let (w, h) = (scene.camera.width, scene.camera.height);
     let show = !args.quiet && std::io::stderr().is_terminal();
-    let bar = ProgressBar::with_draw_target(Some(w as u64 * h as u64), if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() });
+    let bar = ProgressBar::with_draw_target(
+        Some(w as u64 * h as u64),
+        if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
+    );
     bar.set_style(
         ProgressStyle::with_template("{spinner} rendering [{bar:40}] {percent:>3}% {elapsed_precise} eta {eta}")
             .expect("valid template")
@@ -215,7 +218,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
 pub(crate) fn load_scene(path: Option<&Path>, defines: &[(String, String)]) -> Result<Scene> {
     Ok(match path {
         Some(path) => render::loader::load_file(path, defines)?,
-        None => render::loader::load_str(DEFAULT_SCENE, Path::new("<embedded default scene>"), Path::new("."), defines)?,
+        None => {
+            render::loader::load_str(DEFAULT_SCENE, Path::new("<embedded default scene>"), Path::new("."), defines)?
+        }
     })
 }
 

@@ -36,7 +36,8 @@ fn default_scene_renders_png_and_exr() {
     assert_eq!(stats["counts"]["samples"], 40 * 40 * 2);
     assert!(stats["phases"]["render_s"].as_f64().unwrap() > 0.0);
     // Only the finished files are left: no temporaries.
-    let names: Vec<String> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    let names: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
     assert_eq!(names.len(), 3, "{names:?}");
 }
 

@@ -63,11 +63,7 @@ fn compare(rows: &[ConstraintDerivatives], var_x1: DMat2, var_h: &[DMat2], label
         let e = rel_err(v, expect);
         let expect_cov = get_block(&full, i + 1, i);
         let ec = frob(tr.cov_current_previous() - expect_cov) / frob(expect).max(1e-300);
-        assert!(
-            e < 1e-9 && ec < 1e-9,
-            "{label}: vertex {} var err {e:e} cov err {ec:e}",
-            i + 2
-        );
+        assert!(e < 1e-9 && ec < 1e-9, "{label}: vertex {} var err {e:e} cov err {ec:e}", i + 2);
         assert!(rel_err(tr.var_previous(), get_block(&full, i, i)) < 1e-9);
         worst = worst.max(e).max(ec);
     }
@@ -89,15 +85,8 @@ fn tracker_matches_direct_block_solve_random_matrices() {
                 })
                 .collect();
             let var_x1 = rng.spd(0.01, 1.0);
-            let var_h: Vec<_> = (0..k - 1)
-                .map(|i| {
-                    if (i + rep) % 4 == 3 {
-                        DMat2::ZERO
-                    } else {
-                        rng.spd(0.0, 0.5)
-                    }
-                })
-                .collect();
+            let var_h: Vec<_> =
+                (0..k - 1).map(|i| if (i + rep) % 4 == 3 { DMat2::ZERO } else { rng.spd(0.0, 0.5) }).collect();
             worst = worst.max(compare(&rows, var_x1, &var_h, &format!("k {k} rep {rep}")));
         }
     }
@@ -117,30 +106,16 @@ fn tracker_matches_direct_block_solve_geometric_paths() {
         let mut nodes = Vec::new();
         for i in 0..7 {
             let place = match (i + rep) % 3 {
-                0 => Place::Plane {
-                    dist: rng.range(1.0, 3.0),
-                    tilt: rng.range(-0.6, 0.6),
-                },
+                0 => Place::Plane { dist: rng.range(1.0, 3.0), tilt: rng.range(-0.6, 0.6) },
                 1 => Place::SphereOutside {
                     dist: rng.range(1.0, 3.0),
                     r: rng.range(0.5, 2.0),
                     beta: rng.range(0.0, 0.8),
                     inward: false,
                 },
-                _ => Place::Triangle {
-                    dist: rng.range(1.0, 3.0),
-                    tilt: rng.range(-0.6, 0.6),
-                    bend: 0.3,
-                },
+                _ => Place::Triangle { dist: rng.range(1.0, 3.0), tilt: rng.range(-0.6, 0.6), bend: 0.3 },
             };
-            let place = if i == 0 {
-                Place::Plane {
-                    dist: 4.0,
-                    tilt: 0.3,
-                }
-            } else {
-                place
-            };
+            let place = if i == 0 { Place::Plane { dist: 4.0, tilt: 0.3 } } else { place };
             nodes.push(Node {
                 place,
                 event: if i == 6 { Event::End } else { Event::Reflect },

@@ -18,18 +18,13 @@ pub struct Rng {
 
 impl Rng {
     pub fn new(seed: u64) -> Self {
-        let mut r = Rng {
-            state: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xDA3E_39CB_94B9_5BDB,
-            spare: None,
-        };
+        let mut r = Rng { state: seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ 0xDA3E_39CB_94B9_5BDB, spare: None };
         r.next_u32();
         r
     }
     pub fn next_u32(&mut self) -> u32 {
         let old = self.state;
-        self.state = old
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        self.state = old.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         let xorshifted = (((old >> 18) ^ old) >> 27) as u32;
         let rot = (old >> 59) as u32;
         xorshifted.rotate_right(rot)
@@ -98,11 +93,7 @@ impl Frame {
         let b0 = n.cross(t0);
         let (s, c) = angle.sin_cos();
         let t = t0 * c + b0 * s;
-        Frame {
-            t,
-            b: n.cross(t),
-            n,
-        }
+        Frame { t, b: n.cross(t), n }
     }
     pub fn to_local(&self, v: DVec3) -> DVec2 {
         DVec2::new(self.t.dot(v), self.b.dot(v))
@@ -118,11 +109,7 @@ pub fn min_rotation(from: DVec3, to: DVec3, v: DVec3) -> DVec3 {
 
 /// The frame carried from `f0` to the new normal `n` by minimal rotation.
 pub fn transport(f0: &Frame, n: DVec3) -> Frame {
-    Frame {
-        t: min_rotation(f0.n, n, f0.t),
-        b: min_rotation(f0.n, n, f0.b),
-        n,
-    }
+    Frame { t: min_rotation(f0.n, n, f0.t), b: min_rotation(f0.n, n, f0.b), n }
 }
 
 /// Rotates `v` about unit `axis` by `angle`.
@@ -138,10 +125,7 @@ pub fn perpendicular(d: DVec3) -> DVec3 {
 
 fn solve2(m: [[f64; 2]; 2], r: DVec2) -> DVec2 {
     let det = m[0][0] * m[1][1] - m[0][1] * m[1][0];
-    DVec2::new(
-        (r.x * m[1][1] - m[0][1] * r.y) / det,
-        (m[0][0] * r.y - m[1][0] * r.x) / det,
-    )
+    DVec2::new((r.x * m[1][1] - m[0][1] * r.y) / det, (m[0][0] * r.y - m[1][0] * r.x) / det)
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -150,32 +134,18 @@ fn solve2(m: [[f64; 2]; 2], r: DVec2) -> DVec2 {
 #[derive(Clone, Copy, Debug)]
 pub enum Surface {
     /// Plane through `p0` with normal `n`, parameterised as `p0 + u a + v c` (uv = (u, v)).
-    Plane {
-        p0: DVec3,
-        n: DVec3,
-        a: DVec3,
-        c: DVec3,
-    },
+    Plane { p0: DVec3, n: DVec3, a: DVec3, c: DVec3 },
     /// Sphere; the normal is outward unless `inward`. uv = (φ, θ) in world spherical coordinates.
     Sphere { c: DVec3, r: f64, inward: bool },
     /// Flat triangle with vertex normals `m` (interpolated, normalised) and vertex uvs.
-    Triangle {
-        q: [DVec3; 3],
-        m: [DVec3; 3],
-        uv: [DVec2; 3],
-    },
+    Triangle { q: [DVec3; 3], m: [DVec3; 3], uv: [DVec2; 3] },
 }
 
 impl Surface {
     pub fn plane(p0: DVec3, n: DVec3) -> Surface {
         let n = n.normalize();
         let f = Frame::around(n, 0.7);
-        Surface::Plane {
-            p0,
-            n,
-            a: f.t * 1.3 + f.b * 0.4,
-            c: f.t * -0.2 + f.b * 0.9,
-        }
+        Surface::Plane { p0, n, a: f.t * 1.3 + f.b * 0.4, c: f.t * -0.2 + f.b * 0.9 }
     }
 
     /// Barycentrics (β₁, β₂) of a point in the triangle's plane.
@@ -183,10 +153,7 @@ impl Surface {
         let e1 = q[1] - q[0];
         let e2 = q[2] - q[0];
         let d = p - q[0];
-        solve2(
-            [[e1.dot(e1), e1.dot(e2)], [e2.dot(e1), e2.dot(e2)]],
-            DVec2::new(e1.dot(d), e2.dot(d)),
-        )
+        solve2([[e1.dot(e1), e1.dot(e2)], [e2.dot(e1), e2.dot(e2)]], DVec2::new(e1.dot(d), e2.dot(d)))
     }
 
     fn tri_interp_normal(q: &[DVec3; 3], m: &[DVec3; 3], p: DVec3) -> DVec3 {
@@ -256,10 +223,7 @@ impl Surface {
             Surface::Triangle { q, .. } => {
                 let e1 = q[1] - q[0];
                 let e2 = q[2] - q[0];
-                let db = solve2(
-                    [[f0.t.dot(e1), f0.t.dot(e2)], [f0.b.dot(e1), f0.b.dot(e2)]],
-                    dx,
-                );
+                let db = solve2([[f0.t.dot(e1), f0.t.dot(e2)], [f0.b.dot(e1), f0.b.dot(e2)]], dx);
                 let p = p0 + e1 * db.x + e2 * db.y;
                 (p, transport(f0, self.normal(p)))
             }
@@ -271,10 +235,7 @@ impl Surface {
         match *self {
             Surface::Plane { p0, a, c, .. } => {
                 let d = p - p0;
-                solve2(
-                    [[a.dot(a), a.dot(c)], [c.dot(a), c.dot(c)]],
-                    DVec2::new(a.dot(d), c.dot(d)),
-                )
+                solve2([[a.dot(a), a.dot(c)], [c.dot(a), c.dot(c)]], DVec2::new(a.dot(d), c.dot(d)))
             }
             Surface::Sphere { c, r, .. } => {
                 let d = (p - c) / r;
@@ -322,17 +283,7 @@ impl Surface {
                 (dpdu, dpdv, dndu, dndv)
             }
         };
-        Vertex {
-            p,
-            n: f.n,
-            t: f.t,
-            b: f.b,
-            dpdu,
-            dpdv,
-            dndu,
-            dndv,
-            uv: self.uv(p),
-        }
+        Vertex { p, n: f.n, t: f.t, b: f.b, dpdu, dpdv, dndu, dndv, uv: self.uv(p) }
     }
 }
 
@@ -396,20 +347,10 @@ pub enum Place {
     /// A plane hit at distance `dist`, its normal `−ω` tilted by `tilt` radians.
     Plane { dist: f64, tilt: f64 },
     /// A sphere of radius `r` hit from outside at distance `dist` with incidence angle `beta`.
-    SphereOutside {
-        dist: f64,
-        r: f64,
-        beta: f64,
-        inward: bool,
-    },
+    SphereOutside { dist: f64, r: f64, beta: f64, inward: bool },
     /// A sphere of radius `r` containing the ray origin, hit from inside at distance `dist` with
     /// incidence angle `beta` (requires `dist < 2 r cos beta`).
-    SphereInside {
-        dist: f64,
-        r: f64,
-        beta: f64,
-        inward: bool,
-    },
+    SphereInside { dist: f64, r: f64, beta: f64, inward: bool },
     /// The far side of the previous vertex's sphere (the ray is inside it).
     SameSphere,
     /// A triangle with vertex normals tilted by up to `bend` radians, hit at `dist`, its
@@ -441,12 +382,7 @@ impl Camera {
         let f = (target - origin).normalize();
         let right = perpendicular(f);
         let up = f.cross(right);
-        Camera {
-            origin,
-            forward: f,
-            right: right * pixel_angle,
-            up: up * pixel_angle,
-        }
+        Camera { origin, forward: f, right: right * pixel_angle, up: up * pixel_angle }
     }
     pub fn dir(&self, px: DVec2) -> DVec3 {
         self.forward + self.right * px.x + self.up * px.y
@@ -477,34 +413,16 @@ impl Path {
                     let axis = perpendicular(d);
                     Surface::plane(h, rotate(-d, axis, tilt))
                 }
-                Place::SphereOutside {
-                    dist,
-                    r,
-                    beta,
-                    inward,
-                } => {
+                Place::SphereOutside { dist, r, beta, inward } => {
                     let h = o + d * dist;
                     let n = -d * beta.cos() + perpendicular(d) * beta.sin();
-                    Surface::Sphere {
-                        c: h - n * r,
-                        r,
-                        inward,
-                    }
+                    Surface::Sphere { c: h - n * r, r, inward }
                 }
-                Place::SphereInside {
-                    dist,
-                    r,
-                    beta,
-                    inward,
-                } => {
+                Place::SphereInside { dist, r, beta, inward } => {
                     assert!(dist < 2.0 * r * beta.cos());
                     let h = o + d * dist;
                     let n = d * beta.cos() + perpendicular(d) * beta.sin();
-                    Surface::Sphere {
-                        c: h - n * r,
-                        r,
-                        inward,
-                    }
+                    Surface::Sphere { c: h - n * r, r, inward }
                 }
                 Place::SameSphere => surfaces[k - 1],
                 Place::Triangle { dist, tilt, bend } => {
@@ -512,21 +430,13 @@ impl Path {
                     let axis = perpendicular(d);
                     let ng = rotate(-d, axis, tilt);
                     let f = Frame::around(ng, 0.3);
-                    let q = [
-                        h + f.t * -1.0 + f.b * -0.7,
-                        h + f.t * 1.2 + f.b * -0.4,
-                        h + f.t * -0.1 + f.b * 1.1,
-                    ];
+                    let q = [h + f.t * -1.0 + f.b * -0.7, h + f.t * 1.2 + f.b * -0.4, h + f.t * -0.1 + f.b * 1.1];
                     let m = [
                         rotate(ng, f.t, bend).normalize(),
                         rotate(ng, f.b, -0.8 * bend).normalize(),
                         rotate(ng, (f.t + f.b).normalize(), 0.6 * bend).normalize(),
                     ];
-                    let uv = [
-                        DVec2::new(0.1, 0.2),
-                        DVec2::new(0.9, 0.35),
-                        DVec2::new(0.3, 0.8),
-                    ];
+                    let uv = [DVec2::new(0.1, 0.2), DVec2::new(0.9, 0.35), DVec2::new(0.3, 0.8)];
                     Surface::Triangle { q, m, uv }
                 }
             };
@@ -554,20 +464,12 @@ impl Path {
                 d = wo.normalize();
             }
         }
-        Path {
-            camera,
-            nodes,
-            surfaces,
-            points,
-            frames,
-        }
+        Path { camera, nodes, surfaces, points, frames }
     }
 
     /// Library vertex descriptions of the base path.
     pub fn lib_vertices(&self) -> Vec<Vertex> {
-        (0..self.points.len())
-            .map(|k| self.surfaces[k].lib_vertex(self.points[k], &self.frames[k]))
-            .collect()
+        (0..self.points.len()).map(|k| self.surfaces[k].lib_vertex(self.points[k], &self.frames[k])).collect()
     }
 
     /// Exactly re-traces the path for a pixel offset and half-vector slope offsets (one per
@@ -617,9 +519,7 @@ pub fn dense_inverse(a: &[Vec<f64>]) -> Vec<Vec<f64>> {
         })
         .collect();
     for col in 0..n {
-        let piv = (col..n)
-            .max_by(|&i, &j| m[i][col].abs().partial_cmp(&m[j][col].abs()).unwrap())
-            .unwrap();
+        let piv = (col..n).max_by(|&i, &j| m[i][col].abs().partial_cmp(&m[j][col].abs()).unwrap()).unwrap();
         m.swap(col, piv);
         let p = m[col][col];
         assert!(p.abs() > 1e-300, "singular");

@@ -12,11 +12,7 @@ fn make_surface(kind: usize, p: DVec3, nd: DVec3, rng: &mut Rng) -> Surface {
         1 => {
             let r = rng.range(0.5, 3.0);
             let nout = (nd + rng.unit_vector() * 0.2).normalize();
-            Surface::Sphere {
-                c: p - nout * r,
-                r,
-                inward: rng.uniform() < 0.5,
-            }
+            Surface::Sphere { c: p - nout * r, r, inward: rng.uniform() < 0.5 }
         }
         _ => {
             let ng = (nd + rng.unit_vector() * 0.2).normalize();
@@ -73,26 +69,18 @@ fn check(cfg: &Config, label: &str) -> f64 {
         let (q, _) = s2.moved(p2, &f2, dx);
         slope(p0, p1, &f1, q, ev)
     });
-    let v: Vec<_> = (0..3)
-        .map(|k| cfg.surf[k].lib_vertex(cfg.p[k], &cfg.f[k]))
-        .collect();
+    let v: Vec<_> = (0..3).map(|k| cfg.surf[k].lib_vertex(cfg.p[k], &cfg.f[k])).collect();
     let d = constraint_derivatives(&v[0], &v[1], &v[2], ev.lib());
     let mut worst: f64 = 0.0;
     for (name, lib, fd) in [("A", d.a, fd_a), ("B", d.b, fd_b), ("C", d.c, fd_c)] {
         let err = frob(lib - fd) / (1.0 + frob(fd));
-        assert!(
-            err < 1e-6,
-            "{label}: {name} mismatch (err {err:e})\nlib {lib:?}\nfd  {fd:?}"
-        );
+        assert!(err < 1e-6, "{label}: {name} mismatch (err {err:e})\nlib {lib:?}\nfd  {fd:?}");
         worst = worst.max(err);
     }
     // The base slope itself also agrees with the library's.
     let s_lib = footprint::half_vector_slope(p0, &v[1], p2, ev.lib());
     let s_ind = slope(p0, p1, &f1, p2, ev);
-    assert!(
-        (s_lib - s_ind).length() < 1e-9 * (1.0 + s_ind.length()),
-        "{label}: slope"
-    );
+    assert!((s_lib - s_ind).length() < 1e-9 * (1.0 + s_ind.length()), "{label}: slope");
     worst
 }
 
@@ -138,11 +126,7 @@ fn constraint_derivatives_match_finite_differences() {
     let mut rng = Rng::new(11);
     let mut worst: f64 = 0.0;
     let mut count = 0;
-    for ev in [
-        Event::Reflect,
-        Event::Refract(1.5),
-        Event::Refract(1.0 / 1.5),
-    ] {
+    for ev in [Event::Reflect, Event::Refract(1.5), Event::Refract(1.0 / 1.5)] {
         for k0 in 0..3 {
             for k1 in 0..3 {
                 for k2 in 0..3 {
@@ -166,9 +150,7 @@ fn constraint_derivatives_match_finite_differences() {
 fn finite_differences_see_curvature_and_frame_rotation() {
     let mut rng = Rng::new(5);
     let cfg = random_config(&mut rng, [1, 1, 1], Event::Reflect);
-    let mut v: Vec<_> = (0..3)
-        .map(|k| cfg.surf[k].lib_vertex(cfg.p[k], &cfg.f[k]))
-        .collect();
+    let mut v: Vec<_> = (0..3).map(|k| cfg.surf[k].lib_vertex(cfg.p[k], &cfg.f[k])).collect();
     let good = constraint_derivatives(&v[0], &v[1], &v[2], Event::Reflect.lib());
     v[1].dndu = DVec3::ZERO;
     v[1].dndv = DVec3::ZERO;

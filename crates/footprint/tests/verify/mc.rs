@@ -23,61 +23,29 @@ fn glossy_path() -> Path {
     Path::build(
         cam,
         vec![
+            node(Place::Plane { dist: 4.8, tilt: 0.15 }, Event::Reflect, 0.2, [0.05, -0.03], 0.3),
             node(
-                Place::Plane {
-                    dist: 4.8,
-                    tilt: 0.15,
-                },
-                Event::Reflect,
-                0.2,
-                [0.05, -0.03],
-                0.3,
-            ),
-            node(
-                Place::SphereOutside {
-                    dist: 3.0,
-                    r: 1.0,
-                    beta: 0.5,
-                    inward: false,
-                },
+                Place::SphereOutside { dist: 3.0, r: 1.0, beta: 0.5, inward: false },
                 Event::Reflect,
                 0.1,
                 [-0.02, 0.04],
                 1.2,
             ),
             node(
-                Place::Triangle {
-                    dist: 2.5,
-                    tilt: 0.4,
-                    bend: 0.3,
-                },
+                Place::Triangle { dist: 2.5, tilt: 0.4, bend: 0.3 },
                 Event::Reflect,
                 1.0, // diffuse
                 [0.3, -0.2],
                 2.0,
             ),
             node(
-                Place::SphereInside {
-                    dist: 1.5,
-                    r: 2.0,
-                    beta: 0.2,
-                    inward: true,
-                },
+                Place::SphereInside { dist: 1.5, r: 2.0, beta: 0.2, inward: true },
                 Event::Reflect,
                 0.15,
                 [0.01, 0.02],
                 0.7,
             ),
-            node(
-                Place::Plane {
-                    dist: 2.0,
-                    tilt: 0.6,
-                },
-                Event::End,
-                0.0,
-                [0.0, 0.0],
-                0.0,
-            ),
+            node(Place::Plane { dist: 2.0, tilt: 0.6 }, Event::End, 0.0, [0.0, 0.0], 0.0),
         ],
     )
 }
@@ -116,13 +84,7 @@ fn check(path: &Path, name: &str, seed: u64) -> Vec<DMat2> {
     for i in 0..pred.len() {
         let e = rel_err(mc[i], pred[i]);
         eprintln!("{name} vertex {}: relative Frobenius error {e:.4}", i + 1);
-        assert!(
-            e < TOLERANCE,
-            "{name} vertex {}: {e}\nmc   {:?}\npred {:?}",
-            i + 1,
-            mc[i],
-            pred[i]
-        );
+        assert!(e < TOLERANCE, "{name} vertex {}: {e}\nmc   {:?}\npred {:?}", i + 1, mc[i], pred[i]);
     }
     mc
 }
@@ -134,9 +96,7 @@ fn monte_carlo_glossy_chain() {
     // Sensitivity: a model that drops the cross-covariance cov(Δx_i, Δx_{i−1}) of eq. (14)
     // is visibly wrong on the same samples, so this test can fail.
     let naive = no_cross_covariance(&path);
-    let worst = (0..naive.len())
-        .map(|i| rel_err(mc[i], naive[i]))
-        .fold(0.0, f64::max);
+    let worst = (0..naive.len()).map(|i| rel_err(mc[i], naive[i])).fold(0.0, f64::max);
     eprintln!("glossy without cross-covariance: worst error {worst:.3}");
     assert!(worst > 3.0 * TOLERANCE);
 }

@@ -7,66 +7,16 @@ use glam::{DMat2, DVec2, DVec3};
 
 pub fn mirror_path() -> Path {
     let cam = Camera::looking_at(DVec3::new(0.0, -4.0, 2.5), DVec3::new(0.2, 0.1, 0.0), 1e-3);
-    let node = |place, event| Node {
-        place,
-        event,
-        alpha: 0.0,
-        base_slope: DVec2::ZERO,
-        frame_angle: 0.4,
-    };
+    let node = |place, event| Node { place, event, alpha: 0.0, base_slope: DVec2::ZERO, frame_angle: 0.4 };
     Path::build(
         cam,
         vec![
-            node(
-                Place::SphereOutside {
-                    dist: 4.5,
-                    r: 1.5,
-                    beta: 0.4,
-                    inward: false,
-                },
-                Event::Reflect,
-            ),
-            node(
-                Place::Plane {
-                    dist: 3.0,
-                    tilt: 0.5,
-                },
-                Event::Reflect,
-            ),
-            node(
-                Place::SphereInside {
-                    dist: 2.5,
-                    r: 3.0,
-                    beta: 0.3,
-                    inward: true,
-                },
-                Event::Reflect,
-            ),
-            node(
-                Place::SphereOutside {
-                    dist: 2.0,
-                    r: 0.8,
-                    beta: 0.6,
-                    inward: false,
-                },
-                Event::Reflect,
-            ),
-            node(
-                Place::SphereInside {
-                    dist: 1.5,
-                    r: 2.0,
-                    beta: 0.2,
-                    inward: false,
-                },
-                Event::Reflect,
-            ),
-            node(
-                Place::Plane {
-                    dist: 2.0,
-                    tilt: -0.3,
-                },
-                Event::End,
-            ),
+            node(Place::SphereOutside { dist: 4.5, r: 1.5, beta: 0.4, inward: false }, Event::Reflect),
+            node(Place::Plane { dist: 3.0, tilt: 0.5 }, Event::Reflect),
+            node(Place::SphereInside { dist: 2.5, r: 3.0, beta: 0.3, inward: true }, Event::Reflect),
+            node(Place::SphereOutside { dist: 2.0, r: 0.8, beta: 0.6, inward: false }, Event::Reflect),
+            node(Place::SphereInside { dist: 1.5, r: 2.0, beta: 0.2, inward: false }, Event::Reflect),
+            node(Place::Plane { dist: 2.0, tilt: -0.3 }, Event::End),
         ],
     )
 }
@@ -75,39 +25,17 @@ pub fn glass_path(alpha: f64) -> Path {
     let cam = Camera::looking_at(DVec3::new(0.3, -5.0, 1.0), DVec3::new(0.0, 0.0, 0.4), 1e-3);
     // A smooth path is exactly specular; a rough base path has non-zero half-vector slopes.
     let rough = if alpha > 0.0 { 1.0 } else { 0.0 };
-    let node = |place, event, slope| Node {
-        place,
-        event,
-        alpha,
-        base_slope: slope,
-        frame_angle: 1.1,
-    };
+    let node = |place, event, slope| Node { place, event, alpha, base_slope: slope, frame_angle: 1.1 };
     Path::build(
         cam,
         vec![
             node(
-                Place::SphereOutside {
-                    dist: 4.0,
-                    r: 1.0,
-                    beta: 0.35,
-                    inward: false,
-                },
+                Place::SphereOutside { dist: 4.0, r: 1.0, beta: 0.35, inward: false },
                 Event::Refract(1.5),
                 DVec2::new(0.02, -0.03) * rough,
             ),
-            node(
-                Place::SameSphere,
-                Event::Refract(1.0 / 1.5),
-                DVec2::new(-0.01, 0.02) * rough,
-            ),
-            node(
-                Place::Plane {
-                    dist: 3.0,
-                    tilt: 0.3,
-                },
-                Event::End,
-                DVec2::ZERO,
-            ),
+            node(Place::SameSphere, Event::Refract(1.0 / 1.5), DVec2::new(-0.01, 0.02) * rough),
+            node(Place::Plane { dist: 3.0, tilt: 0.3 }, Event::End, DVec2::ZERO),
         ],
     )
 }
@@ -205,16 +133,9 @@ fn mirror_chain_matches_igehy_ray_differentials() {
     for k in 0..pred.len() {
         let e = rel_err(pred[k], quarter_jjt(ig[k]));
         let e_fd = rel_err(quarter_jjt(fd[k]), quarter_jjt(ig[k]));
-        eprintln!(
-            "mirror vertex {}: tracker vs Igehy {e:e}, traced vs Igehy {e_fd:e}",
-            k + 1
-        );
+        eprintln!("mirror vertex {}: tracker vs Igehy {e:e}, traced vs Igehy {e_fd:e}", k + 1);
         assert!(e < 1e-9, "vertex {}: {e:e}", k + 1);
-        assert!(
-            e_fd < 1e-5,
-            "test-side Igehy vs traced rays at vertex {}: {e_fd:e}",
-            k + 1
-        );
+        assert!(e_fd < 1e-5, "test-side Igehy vs traced rays at vertex {}: {e_fd:e}", k + 1);
     }
     // The chain is not trivial: the footprint's shape changes along it.
     let ratio = |m: DMat2| m.determinant().sqrt() / (m.x_axis.x + m.y_axis.y);
@@ -242,8 +163,7 @@ fn pbrt_estimator_agrees_on_specular_chains() {
         let pred = tracker_footprints(&path);
         let v = path.lib_vertices();
         let cam = &path.camera;
-        let mut pbrt =
-            PbrtDifferentials::new(cam.origin, cam.forward, cam.right, cam.up, 1e-3, 1.0);
+        let mut pbrt = PbrtDifferentials::new(cam.origin, cam.forward, cam.right, cam.up, 1e-3, 1.0);
         for k in 0..v.len() {
             let cov = pbrt.advance(&v[k]);
             let e = rel_err(cov, pred[k]);

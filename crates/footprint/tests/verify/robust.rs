@@ -148,10 +148,7 @@ fn alpha_zero_chain_with_zero_start_stays_zero() {
 fn enormous_inputs_are_clamped() {
     let cam = DVec3::new(0.0, -1.0, 1.0);
     let a = Vertex::on_plane(DVec3::ZERO, DVec3::Z);
-    let far = Vertex::on_plane(
-        DVec3::new(0.0, 1.0, 1.0) * 1e20,
-        DVec3::new(0.0, -1.0, -1.0),
-    );
+    let far = Vertex::on_plane(DVec3::new(0.0, 1.0, 1.0) * 1e20, DVec3::new(0.0, -1.0, -1.0));
     let mut tr = FootprintTracker::start_path(cam, &a, DMat2::IDENTITY * 1e-6);
     let v = tr.advance(&far, Scatter::Reflection, half_vector_variance(1e30));
     assert!(finite_psd_bounded(v));
@@ -160,14 +157,8 @@ fn enormous_inputs_are_clamped() {
     assert!(f.world.is_finite());
     assert_eq!(f.lod(1e6), LOD_MAX);
     // Roughness inputs.
-    assert_eq!(
-        half_vector_variance(f64::INFINITY),
-        half_vector_variance(MAX_ALPHA)
-    );
-    assert_eq!(
-        half_vector_variance(f64::NAN),
-        half_vector_variance(MAX_ALPHA)
-    );
+    assert_eq!(half_vector_variance(f64::INFINITY), half_vector_variance(MAX_ALPHA));
+    assert_eq!(half_vector_variance(f64::NAN), half_vector_variance(MAX_ALPHA));
     assert_eq!(half_vector_variance(-1.0), DMat2::ZERO);
     assert_eq!(ggx_to_beckmann_alpha(f32::NAN), MAX_ALPHA as f32);
     assert_eq!(ggx_to_beckmann_alpha(f32::INFINITY), MAX_ALPHA as f32);
@@ -190,11 +181,7 @@ fn index_matched_refraction_is_straight_propagation() {
     let direct = first_vertex_variance(cam, dir, right, up, &second);
     for eta in [1.0, 1.0 + 1e-7, 1.0 - 1e-7] {
         let mut tr = FootprintTracker::start_path(cam, &first, var1);
-        let v = tr.advance(
-            &second,
-            Scatter::Refraction { eta },
-            half_vector_variance(0.5),
-        );
+        let v = tr.advance(&second, Scatter::Refraction { eta }, half_vector_variance(0.5));
         assert!(finite_psd_bounded(v));
         let e = crate::common::rel_err(v, direct);
         eprintln!("index-matched eta {eta}: relative error to straight transfer {e:e}");
@@ -214,11 +201,7 @@ fn vanishing_half_vector_and_coincident_vertices() {
     let d = constraint_derivatives(&prev, &a, &next, Scatter::Reflection);
     assert!(d.is_finite());
     let mut tr = FootprintTracker::start_path(prev.p, &a, DMat2::IDENTITY * 1e-6);
-    assert!(finite_psd_bounded(tr.advance(
-        &next,
-        Scatter::Reflection,
-        half_vector_variance(0.2)
-    )));
+    assert!(finite_psd_bounded(tr.advance(&next, Scatter::Reflection, half_vector_variance(0.2))));
     // Half vector in the tangent plane (h·n = 0).
     let prev = Vertex::point(DVec3::new(-1.0, 0.0, 0.0));
     let next = Vertex::on_plane(DVec3::new(0.0, 1.0, 0.0), -DVec3::Y);
@@ -231,11 +214,7 @@ fn vanishing_half_vector_and_coincident_vertices() {
     let d = constraint_derivatives(&same, &a, &a, Scatter::Refraction { eta: 1.5 });
     assert!(d.is_finite());
     let mut tr = FootprintTracker::start_path(DVec3::ZERO, &a, DMat2::IDENTITY);
-    assert!(finite_psd_bounded(tr.advance(
-        &a,
-        Scatter::Reflection,
-        half_vector_variance(1.0)
-    )));
+    assert!(finite_psd_bounded(tr.advance(&a, Scatter::Reflection, half_vector_variance(1.0))));
 }
 
 #[test]
@@ -252,13 +231,7 @@ fn degenerate_uv_mappings() {
         ("sliver", t, b * 1e-9),
     ];
     for (name, dpdu, dpdv) in cases {
-        let v = Vertex {
-            dpdu,
-            dpdv,
-            dndu: dpdu * 0.3,
-            dndv: dpdv * 0.3,
-            ..base
-        };
+        let v = Vertex { dpdu, dpdv, dndu: dpdu * 0.3, dndv: dpdv * 0.3, ..base };
         let l = v.local();
         assert!(l.shape.is_finite() && l.uv_jacobian.is_finite(), "{name}");
         // Tangent-plane components of the tangent map stay the identity.
@@ -267,10 +240,7 @@ fn degenerate_uv_mappings() {
         let uv = uv_covariance(cov, &v);
         assert!(finite_psd_bounded(uv), "{name}: {uv:?}");
         let lod = lod(uv, 512.0);
-        assert!(
-            lod.is_finite() && (LOD_MIN..=LOD_MAX).contains(&lod),
-            "{name}"
-        );
+        assert!(lod.is_finite() && (LOD_MIN..=LOD_MAX).contains(&lod), "{name}");
         if dpdu == DVec3::ZERO && dpdv == DVec3::ZERO {
             assert_eq!(uv, DMat2::ZERO);
             assert_eq!(l.shape, DMat2::ZERO);
@@ -331,11 +301,7 @@ fn estimators_stay_finite() {
     let mut cone = RayCone::new(cam, dir, 1e-3);
     let v = cone.advance(&hit);
     assert!(finite_psd_bounded(v));
-    cone.scatter(
-        &hit,
-        DVec3::new(0.0, 1.0, 1e-12).normalize(),
-        Scatter::Refraction { eta: f64::NAN },
-    );
+    cone.scatter(&hit, DVec3::new(0.0, 1.0, 1e-12).normalize(), Scatter::Refraction { eta: f64::NAN });
     assert!(cone.width.is_finite() && cone.spread.is_finite());
     let mut p = PbrtDifferentials::new(cam, dir, DVec3::X * 1e-3, DVec3::Z * 1e-3, 1e-3, 1.0);
     assert!(finite_psd_bounded(p.advance(&hit)));

@@ -19,34 +19,19 @@ fn uv_jacobian_fd(s: &Surface, p: DVec3, f: &Frame) -> DMat2 {
 fn uv_covariance_matches_exact_uv_mapping() {
     let mut rng = Rng::new(23);
     let tri = Surface::Triangle {
-        q: [
-            DVec3::new(-1.0, -0.5, 0.1),
-            DVec3::new(1.2, -0.3, -0.2),
-            DVec3::new(0.1, 1.0, 0.3),
-        ],
+        q: [DVec3::new(-1.0, -0.5, 0.1), DVec3::new(1.2, -0.3, -0.2), DVec3::new(0.1, 1.0, 0.3)],
         m: [
             DVec3::new(0.2, 0.0, 1.0).normalize(),
             DVec3::new(-0.1, 0.3, 1.0).normalize(),
             DVec3::new(0.0, -0.2, 1.0).normalize(),
         ],
-        uv: [
-            DVec2::new(0.0, 0.0),
-            DVec2::new(3.0, 0.5),
-            DVec2::new(-0.5, 2.0),
-        ],
+        uv: [DVec2::new(0.0, 0.0), DVec2::new(3.0, 0.5), DVec2::new(-0.5, 2.0)],
     };
-    let sphere = Surface::Sphere {
-        c: DVec3::new(0.3, -0.2, 0.5),
-        r: 1.7,
-        inward: false,
-    };
+    let sphere = Surface::Sphere { c: DVec3::new(0.3, -0.2, 0.5), r: 1.7, inward: false };
     let plane = Surface::plane(DVec3::new(1.0, 2.0, 3.0), DVec3::new(0.3, 0.4, 1.0));
     let points = [
         (tri, DVec3::new(0.05, 0.0, 0.0)),
-        (
-            sphere,
-            DVec3::new(0.3, -0.2, 0.5) + DVec3::new(0.6, 0.5, 0.62).normalize() * 1.7,
-        ),
+        (sphere, DVec3::new(0.3, -0.2, 0.5) + DVec3::new(0.6, 0.5, 0.62).normalize() * 1.7),
         (plane, DVec3::new(1.0, 2.0, 3.0)),
     ];
     for (k, (s, p0)) in points.into_iter().enumerate() {
@@ -75,18 +60,8 @@ fn world_covariance_is_t_sigma_t_and_frame_independent() {
     let n = rng.unit_vector();
     let f1 = Frame::around(n, 0.0);
     let f2 = Frame::around(n, 1.1); // same plane, rotated tangent
-    let v1 = Vertex {
-        t: f1.t,
-        b: f1.b,
-        n,
-        ..Vertex::on_plane(DVec3::ONE, n)
-    };
-    let v2 = Vertex {
-        t: f2.t,
-        b: f2.b,
-        n,
-        ..Vertex::on_plane(DVec3::ONE, n)
-    };
+    let v1 = Vertex { t: f1.t, b: f1.b, n, ..Vertex::on_plane(DVec3::ONE, n) };
+    let v2 = Vertex { t: f2.t, b: f2.b, n, ..Vertex::on_plane(DVec3::ONE, n) };
     let cov1 = rng.spd(0.1, 2.0);
     // The same footprint expressed in frame 2: Σ₂ = R Σ₁ Rᵀ with R = [t₂ b₂]ᵀ [t₁ b₁].
     let r = DMat2::from_cols(f2.to_local(f1.t), f2.to_local(f1.b));
@@ -230,14 +205,7 @@ fn estimators_first_hit_on_planes() {
         let (l1, l2) = sorted_eigen(cone.advance(&hit));
         assert!((l1 / expect_major - 1.0).abs() < 1e-9 && (l2 / expect_minor - 1.0).abs() < 1e-9);
         // pbrt after a rough bounce: the camera approximation gives the same footprint.
-        let mut p = PbrtDifferentials::new(
-            DVec3::ZERO,
-            DVec3::Z,
-            DVec3::X * spread,
-            DVec3::Y * spread,
-            spread,
-            1.0,
-        );
+        let mut p = PbrtDifferentials::new(DVec3::ZERO, DVec3::Z, DVec3::X * spread, DVec3::Y * spread, spread, 1.0);
         let direct = p.advance(&hit);
         let (d1, d2) = sorted_eigen(direct);
         assert!((d1 / expect_major - 1.0).abs() < 1e-9 && (d2 / expect_minor - 1.0).abs() < 1e-9);
@@ -248,14 +216,7 @@ fn estimators_first_hit_on_planes() {
         let approx = p.advance(&hit);
         assert!(rel_err(approx, direct) < 1e-9, "tilt {tilt}");
         // spp scale
-        let mut q = PbrtDifferentials::new(
-            DVec3::ZERO,
-            DVec3::Z,
-            DVec3::X * spread,
-            DVec3::Y * spread,
-            spread,
-            0.5,
-        );
+        let mut q = PbrtDifferentials::new(DVec3::ZERO, DVec3::Z, DVec3::X * spread, DVec3::Y * spread, spread, 0.5);
         assert!(rel_err(q.advance(&hit), direct * 0.25) < 1e-9);
     }
 }
@@ -295,10 +256,7 @@ fn ray_cone_matches_tracker_at_normal_incidence() {
         cone.scatter(&v1, (v2.p - v1.p).normalize(), scatter);
         let got = cone.advance(&v2);
         let e = rel_err(got, want);
-        assert!(
-            e < 1e-9,
-            "{scatter:?} inward {inward}: {e:e}\n{got:?}\n{want:?}"
-        );
+        assert!(e < 1e-9, "{scatter:?} inward {inward}: {e:e}\n{got:?}\n{want:?}");
     }
 }
 
@@ -313,11 +271,7 @@ fn ray_cone_ignores_roughness() {
         .map(|k| {
             let f = cone.advance(&v[k]);
             if k + 1 < v.len() {
-                cone.scatter(
-                    &v[k],
-                    (v[k + 1].p - v[k].p).normalize(),
-                    Scatter::Reflection,
-                );
+                cone.scatter(&v[k], (v[k + 1].p - v[k].p).normalize(), Scatter::Reflection);
             }
             f
         })
@@ -325,12 +279,7 @@ fn ray_cone_ignores_roughness() {
     let tracker = crate::mirror::tracker_footprints(&path);
     // Same order of magnitude as the exact α = 0 footprint along the whole mirror chain.
     for k in 0..v.len() {
-        let ratio =
-            (smooth[k].x_axis.x + smooth[k].y_axis.y) / (tracker[k].x_axis.x + tracker[k].y_axis.y);
-        assert!(
-            ratio > 0.2 && ratio < 5.0,
-            "vertex {}: ratio {ratio}",
-            k + 1
-        );
+        let ratio = (smooth[k].x_axis.x + smooth[k].y_axis.y) / (tracker[k].x_axis.x + tracker[k].y_axis.y);
+        assert!(ratio > 0.2 && ratio < 5.0, "vertex {}: ratio {ratio}", k + 1);
     }
 }
