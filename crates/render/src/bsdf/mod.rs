@@ -332,19 +332,18 @@ impl BsdfDesc {
 /// Converts a roughness of distribution `kind` to the Beckmann roughness used by the footprint
 /// model (slope standard deviation `σ = α/√2` per axis).
 ///
-/// GGX has infinite slope variance, so variances cannot be matched; we match the **peak of the
-/// distribution** instead: both `D_beckmann(n)` and `D_ggx(n)` equal `1/(π α²)` at the normal,
-/// i.e. the two lobes have the same height and the same solid angle `π α²` at equal α. This is
-/// the identity map, the equivalence Walter et al. 2007 use when comparing the two. (Matching
-/// the curvature of the peak instead would give `α_b = α_ggx/√2` and ignore GGX's long tails.)
+/// GGX has infinite slope variance, so variances cannot be matched. The footprint is a measure
+/// of spread, so we match the **median slope magnitude**: for GGX `P(|m| < r) = r²/(α² + r²)`
+/// has median `α`, for Beckmann `1 − exp(−r²/α_b²)` has median `α_b √(ln 2)`, hence
+/// `α_b = α_ggx / √(ln 2) ≈ 1.2011 α_ggx`. The conversion itself lives in the footprint crate
+/// ([`footprint::ggx_to_beckmann_alpha`]) so the whole system uses one definition.
 pub fn beckmann_equivalent_alpha(kind: MicrofacetKind, alpha: f32) -> f32 {
     match kind {
-        MicrofacetKind::Beckmann | MicrofacetKind::Ggx => alpha,
+        MicrofacetKind::Beckmann => alpha,
+        MicrofacetKind::Ggx => footprint::ggx_to_beckmann_alpha(alpha),
     }
 }
 
-/// The scalar roughness of an anisotropic lobe: `√((α_u² + α_v²)/2)`, which keeps the total
-/// slope variance (the trace of the slope covariance) of the lobe.
 pub(crate) fn lobe_alpha(md: &Microfacet) -> f32 {
     let a = (0.5 * (md.alpha_u * md.alpha_u + md.alpha_v * md.alpha_v)).sqrt();
     beckmann_equivalent_alpha(md.kind, a)
