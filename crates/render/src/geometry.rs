@@ -110,9 +110,19 @@ pub struct SurfaceInteraction {
     pub shape: u32,
 }
 
+/// What kind of primitive a BVH leaf holds (kept beside the reference so that a triangle test
+/// never has to load its shape).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum PrimKind {
+    Triangle,
+    Sphere,
+    Disk,
+}
+
 /// Which primitive a BVH leaf refers to.
 #[derive(Clone, Copy, Debug)]
 struct PrimRef {
+    kind: PrimKind,
     shape: u32,
     /// Triangle index within a mesh; unused for spheres and disks.
     index: u32,
@@ -249,14 +259,14 @@ impl Accel {
                         bb.extend(b.into());
                         bb.extend(c.into());
                         aabbs.push(bb);
-                        prims.push(PrimRef { shape: si as u32, index: ti as u32 });
+                        prims.push(PrimRef { kind: PrimKind::Triangle, shape: si as u32, index: ti as u32 });
                         tris_unordered.push(TriPrim { v0: a, e1: b - a, e2: c - a });
                     }
                 }
                 ShapeGeometry::Sphere { center, radius, .. } => {
                     let r = Vec3::splat(*radius);
                     aabbs.push(Aabb::new((*center - r).into(), (*center + r).into()));
-                    prims.push(PrimRef { shape: si as u32, index: 0 });
+                    prims.push(PrimRef { kind: PrimKind::Sphere, shape: si as u32, index: 0 });
                     tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
                 }
                 ShapeGeometry::Disk { to_world, .. } => {
@@ -266,7 +276,7 @@ impl Accel {
                         bb.extend(Vec3A::from(to_world.transform_point3(Vec3::new(x, y, 0.0))));
                     }
                     aabbs.push(padded(bb));
-                    prims.push(PrimRef { shape: si as u32, index: 0 });
+                    prims.push(PrimRef { kind: PrimKind::Disk, shape: si as u32, index: 0 });
                     tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
                 }
             }
@@ -280,7 +290,7 @@ impl Accel {
         } else {
             obvhs::cwbvh::builder::build_cwbvh(
                 &aabbs,
-                obvhs::BvhBuildParams::medium_build(),
+                obvhs::BvhBuildParams::slow_build(),
                 &mut std::time::Duration::default(),
             )
         };
@@ -310,14 +320,17 @@ impl Accel {
         tmax: f32,
     ) -> Option<(f32, Vec2)> {
         let pr = self.prims[i];
+        if pr.kind == PrimKind::Triangle {
+            return intersect_triangle(&self.tris[i], o, d, tmin, tmax);
+        }
         match &shapes[pr.shape as usize].geometry {
-            ShapeGeometry::Mesh { .. } => intersect_triangle(&self.tris[i], o, d, tmin, tmax),
             ShapeGeometry::Sphere { center, radius, .. } => {
                 intersect_sphere(*center, *radius, o, d, tmin, tmax).map(|t| (t, Vec2::ZERO))
             }
             ShapeGeometry::Disk { to_object, .. } => {
                 intersect_disk(to_object, o, d, tmin, tmax).map(|t| (t, Vec2::ZERO))
             }
+            ShapeGeometry::Mesh { .. } => None,
         }
     }
 

@@ -117,6 +117,8 @@ impl Event {
 /// Receives what happens along a camera path; the render loop uses [`NoObserver`], which
 /// compiles to nothing.
 pub trait PathObserver {
+    /// Whether this observer needs footprints even when no material asks for them.
+    const WANTS_FOOTPRINTS: bool = false;
     /// A surface hit at `depth` (0 = first hit) with its tangent-plane footprint covariance.
     fn hit(&mut self, _depth: u32, _si: &SurfaceInteraction, _vertex: Option<&Vertex>, _var: DMat2) {}
     /// What the path did at `depth`: the sampled event with the lobe's roughness and IOR ratio.
@@ -178,6 +180,7 @@ struct LodObserver {
 }
 
 impl PathObserver for LodObserver {
+    const WANTS_FOOTPRINTS: bool = true;
     fn hit(&mut self, depth: u32, _si: &SurfaceInteraction, vertex: Option<&Vertex>, var: DMat2) {
         if let (Some(v), true) = (vertex, (depth as usize) < AOV_BOUNCES) {
             let lod = footprint::lod(footprint::uv_covariance(var, v), self.density);
@@ -289,7 +292,9 @@ pub fn radiance<O: PathObserver>(
     let mut prev_pdf = 0.0f32;
     let mut prev_delta = true;
     // Footprint state: the estimator, the previous vertex and what was sampled there.
-    let track = settings_r.footprint != FootprintMode::None;
+    // Footprints cost a few hundred nanoseconds per bounce: track them only when a material's
+    // textures or the observer will read them.
+    let track = settings_r.footprint != FootprintMode::None && (scene.footprints_needed || O::WANTS_FOOTPRINTS);
     let mut fp = PathFootprint::None;
     let mut prev_vertex: Option<Vertex> = None;
     let mut prev_bs: Option<crate::bsdf::BsdfSample> = None;

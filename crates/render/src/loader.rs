@@ -141,6 +141,9 @@ impl Builder {
             integrator,
             spp,
             seed,
+            // No texture of the Mitsuba subset filters by footprint (Mitsuba's bitmaps are not
+            // mip-mapped); procedural graphs will.
+            footprints_needed: false,
         })
     }
 

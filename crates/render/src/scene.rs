@@ -37,4 +37,7 @@ pub struct Scene {
     pub spp: u32,
     /// Seed the scene's sampler asks for.
     pub seed: u64,
+    /// Whether any material filters its textures by the path footprint (then every camera path
+    /// tracks footprints; otherwise only when an AOV or `tessera footprint` asks).
+    pub footprints_needed: bool,
 }

@@ -55,6 +55,7 @@ fn mat2_json(m: DMat2) -> Value {
 }
 
 impl PathObserver for Recorder {
+    const WANTS_FOOTPRINTS: bool = true;
     fn hit(&mut self, _depth: u32, si: &SurfaceInteraction, vertex: Option<&Vertex>, var: DMat2) {
         let mut v = json!({
             "position": [si.p.x, si.p.y, si.p.z],

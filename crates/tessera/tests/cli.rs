@@ -110,3 +110,60 @@ fn reference_scene_renders_from_the_command_line() {
     let img = image::open(dir.join("t.png")).unwrap();
     assert_eq!((img.width(), img.height()), (256, 256));
 }
+
+#[test]
+fn footprint_command_prints_a_consistent_path() {
+    let out = tessera()
+        .arg("footprint")
+        .arg(refs_scene("dielectrics.xml"))
+        .args(["--pixel", "80", "140", "--seed", "0", "--json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["schema"], "tessera.footprint/1");
+    let vertices = v["vertices"].as_array().unwrap();
+    // This pixel looks through the smooth glass sphere: refraction with η = 1.5, α = 0.
+    assert_eq!(vertices[0]["event"], "refract");
+    assert!((vertices[0]["eta"].as_f64().unwrap() - 1.5).abs() < 1e-6);
+    assert_eq!(vertices[0]["alpha"].as_f64().unwrap(), 0.0);
+    for vx in vertices.iter().filter(|v| v.get("cov_world").is_some()) {
+        let w: Vec<Vec<f64>> = serde_json::from_value(vx["cov_world"].clone()).unwrap();
+        let n: Vec<f64> = serde_json::from_value(vx["normal"].clone()).unwrap();
+        for i in 0..3 {
+            assert!(w[i][i] >= 0.0);
+            for j in 0..3 {
+                assert!(w[i][j].is_finite() && (w[i][j] - w[j][i]).abs() <= 1e-9 * (1.0 + w[i][i].abs()));
+            }
+        }
+        // T Σ Tᵀ lies in the tangent plane: the shading normal is in its null space.
+        let wn: Vec<f64> = (0..3).map(|i| (0..3).map(|j| w[i][j] * n[j]).sum()).collect();
+        let scale = w[0][0] + w[1][1] + w[2][2];
+        assert!(wn.iter().all(|x| x.abs() <= 1e-4 * scale.max(1e-30)), "{wn:?} vs trace {scale}");
+        assert!(vx["lod"].as_f64().unwrap().is_finite());
+    }
+    // Out-of-image pixels are an error.
+    let bad = tessera().arg("footprint").arg(refs_scene("dielectrics.xml")).args(["--pixel", "999", "0"]).output().unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("outside"));
+}
+
+#[test]
+fn footprint_aov_grows_toward_the_horizon() {
+    let dir = temp_dir("aov");
+    let out = tessera()
+        .current_dir(&dir)
+        .arg("render")
+        .arg(refs_scene("dielectrics.xml"))
+        .args(["--spp", "2", "--quiet", "--aov", "footprint", "--out", "d.exr"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(dir.join("d.footprint.png").is_file());
+    let img = image::open(dir.join("d.footprint.exr")).unwrap().into_rgb32f();
+    // Column 20 sees the floor from row ~120 (far) down to row 255 (near): the first-bounce
+    // footprint in uv shrinks toward the camera.
+    let lod = |y: u32| img.get_pixel(20, y)[0];
+    assert!(lod(130) > lod(250) + 1.0, "far {} near {}", lod(130), lod(250));
+    assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
+}
