@@ -1,0 +1,125 @@
+//! Errors: building a graph ([`BuildError`]) and loading a MaterialX document ([`LoadError`]).
+
+use crate::value::ValueType;
+use std::fmt;
+use std::path::PathBuf;
+
+/// A problem found while building a graph, without source location.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum BuildError {
+    /// The category is not in the node library.
+    #[error("unknown node `{category}`; supported nodes: {supported}")]
+    UnknownNode {
+        /// The category.
+        category: String,
+        /// Every supported category.
+        supported: String,
+    },
+    /// The node exists but not with this output type.
+    #[error("node `{node}`: `{category}` has no {ty} variant")]
+    UnsupportedType {
+        /// Node name.
+        node: String,
+        /// Category.
+        category: &'static str,
+        /// Requested type.
+        ty: ValueType,
+    },
+    /// An input the node does not have.
+    #[error("node `{node}` has no input `{input}`")]
+    UnknownInput {
+        /// Node name.
+        node: String,
+        /// Input name.
+        input: String,
+    },
+    /// A connection or value of the wrong type.
+    #[error("type mismatch at `{node}.{input}`: expected {expected}, found {found}")]
+    TypeMismatch {
+        /// Node name.
+        node: String,
+        /// Input name.
+        input: String,
+        /// What the input accepts.
+        expected: String,
+        /// What was given.
+        found: ValueType,
+    },
+    /// Two nodes or outputs with one name.
+    #[error("duplicate name `{0}`")]
+    DuplicateName(String),
+    /// A node-specific rule failed.
+    #[error("node `{node}`: {message}")]
+    Invalid {
+        /// Node name.
+        node: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Where in a file something was found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Location {
+    /// The file.
+    pub file: PathBuf,
+    /// 1-based line.
+    pub line: u32,
+    /// 1-based column.
+    pub column: u32,
+}
+
+impl fmt::Display for Location {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}:{}:{}", self.file.display(), self.line, self.column)
+    }
+}
+
+/// What went wrong loading a MaterialX document.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum LoadErrorKind {
+    /// The file could not be read.
+    #[error("cannot read file: {0}")]
+    Io(String),
+    /// Not well-formed XML.
+    #[error("malformed XML: {0}")]
+    Xml(String),
+    /// A graph rule failed (unknown node, type mismatch, ...).
+    #[error(transparent)]
+    Build(#[from] BuildError),
+    /// The nodes form a cycle.
+    #[error("cycle through node `{0}`")]
+    Cycle(String),
+    /// A connection names something that does not exist.
+    #[error("`{from}` connects to `{to}`, which does not exist")]
+    Dangling {
+        /// The connecting element.
+        from: String,
+        /// The missing target.
+        to: String,
+    },
+    /// A referenced file does not exist.
+    #[error("missing file `{0}`")]
+    MissingFile(PathBuf),
+    /// A `value` attribute that does not parse as its type.
+    #[error("malformed {ty} value `{text}`")]
+    MalformedValue {
+        /// Declared type.
+        ty: String,
+        /// The text.
+        text: String,
+    },
+    /// A required attribute is absent or an element is misplaced.
+    #[error("{0}")]
+    Structure(String),
+}
+
+/// A load error with its file and line.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{location}: {kind}")]
+pub struct LoadError {
+    /// Where.
+    pub location: Location,
+    /// What.
+    pub kind: LoadErrorKind,
+}

@@ -1,0 +1,296 @@
+//! Filtered evaluation: [`EvalScratch`] (per-thread, preallocated), [`NodeOverride`] (the seam
+//! where a tile cache replaces a node by a lookup), and the evaluation entry points on
+//! [`Graph`].
+//!
+//! Evaluation is demand-driven over a precomputed topological plan: walking the plan backwards
+//! marks what the requested outputs need, asking the override for each needed node first (a
+//! node it answers cuts off its whole upstream); walking forwards evaluates the rest. Nothing
+//! allocates once the scratch exists.
+
+use crate::graph::{Graph, NodeId, OutputId, Source};
+use crate::nodes::{self, geometry, Ctx};
+use crate::value::{Filtered, Footprint, ValueType};
+use glam::Mat2;
+
+/// Counters of the work that filtered evaluation did, for cost checks and profiles.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Work {
+    /// Perlin octaves evaluated (a fully filtered octave counts once, then ends its fractal).
+    pub octaves: u64,
+    /// Lattice corners / cells / feature-point searches visited by noise and patterns.
+    pub lattice: u64,
+}
+
+impl Work {
+    /// Adds another counter set.
+    pub fn merge(&mut self, o: &Work) {
+        self.octaves += o.octaves;
+        self.lattice += o.lattice;
+    }
+}
+
+/// A replacement of a node's filtered evaluation, e.g. by a cached tile lookup.
+pub trait NodeOverride {
+    /// The node's filtered value at `fp`, or `None` to evaluate it.
+    fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered>;
+}
+
+/// The override that never answers: plain evaluation.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct NoOverride;
+
+impl NodeOverride for NoOverride {
+    #[inline]
+    fn lookup(&self, _: NodeId, _: &Footprint) -> Option<Filtered> {
+        None
+    }
+}
+
+/// The nodes a set of outputs needs, in topological order.
+#[derive(Clone, Debug)]
+pub struct EvalPlan {
+    nodes: Vec<NodeId>,
+    outputs: Vec<OutputId>,
+}
+
+impl EvalPlan {
+    /// The nodes, in topological order.
+    pub fn nodes(&self) -> &[NodeId] {
+        &self.nodes
+    }
+
+    /// The outputs, in the order their values are written.
+    pub fn outputs(&self) -> &[OutputId] {
+        &self.outputs
+    }
+}
+
+/// Per-thread evaluation memory and statistics. Create one per thread per graph; merge the
+/// statistics of several with [`EvalScratch::merge_stats_into`].
+#[derive(Debug)]
+pub struct EvalScratch {
+    values: Vec<Filtered>,
+    needed: Vec<bool>,
+    order: Vec<NodeId>,
+    evaluations: Vec<u64>,
+    lookups: Vec<u64>,
+    work: Work,
+}
+
+/// Merged statistics of one or more scratches.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct EvalStats {
+    /// Per node: filtered evaluations.
+    pub evaluations: Vec<u64>,
+    /// Per node: values answered by the override.
+    pub lookups: Vec<u64>,
+    /// Work counters.
+    pub work: Work,
+}
+
+impl EvalScratch {
+    /// Scratch for `graph`.
+    pub fn new(graph: &Graph) -> EvalScratch {
+        let n = graph.node_count();
+        EvalScratch {
+            values: vec![Filtered::zero(ValueType::Float); n],
+            needed: vec![false; n],
+            order: Vec::with_capacity(n),
+            evaluations: vec![0; n],
+            lookups: vec![0; n],
+            work: Work::default(),
+        }
+    }
+
+    /// Evaluations per node since creation or the last reset.
+    pub fn evaluations(&self) -> &[u64] {
+        &self.evaluations
+    }
+
+    /// Override answers per node.
+    pub fn lookups(&self) -> &[u64] {
+        &self.lookups
+    }
+
+    /// Work counters.
+    pub fn work(&self) -> Work {
+        self.work
+    }
+
+    /// Zeroes the statistics.
+    pub fn reset_stats(&mut self) {
+        self.evaluations.fill(0);
+        self.lookups.fill(0);
+        self.work = Work::default();
+    }
+
+    /// Adds this scratch's statistics to `stats` (sized on first use).
+    pub fn merge_stats_into(&self, stats: &mut EvalStats) {
+        if stats.evaluations.len() < self.evaluations.len() {
+            stats.evaluations.resize(self.evaluations.len(), 0);
+            stats.lookups.resize(self.lookups.len(), 0);
+        }
+        for (a, b) in stats.evaluations.iter_mut().zip(&self.evaluations) {
+            *a += b;
+        }
+        for (a, b) in stats.lookups.iter_mut().zip(&self.lookups) {
+            *a += b;
+        }
+        stats.work.merge(&self.work);
+    }
+}
+
+impl Graph {
+    /// The plan for evaluating `outputs` together.
+    pub fn plan(&self, outputs: &[OutputId]) -> EvalPlan {
+        let mut nodes: Vec<NodeId> = Vec::new();
+        for o in outputs {
+            if let Source::Node { node, .. } = self.output(*o).source {
+                nodes.extend_from_slice(self.node_plan(node));
+            }
+        }
+        nodes.sort_unstable();
+        nodes.dedup();
+        EvalPlan { nodes, outputs: outputs.to_vec() }
+    }
+
+    /// Evaluates the plan's outputs filtered over `fp`, writing them to `out` (one per output).
+    pub fn eval(
+        &self,
+        plan: &EvalPlan,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+        out: &mut [Filtered],
+    ) {
+        for &n in &plan.nodes {
+            scratch.needed[n.0 as usize] = false;
+        }
+        for o in &plan.outputs {
+            if let Source::Node { node, .. } = self.output(*o).source {
+                scratch.needed[node.0 as usize] = true;
+            }
+        }
+        self.run(&plan.nodes, None, fp, scratch, ov);
+        for (slot, o) in out.iter_mut().zip(&plan.outputs) {
+            let ctx_point = is_point(fp);
+            *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
+            slot.ty = self.output(*o).ty;
+        }
+    }
+
+    /// Evaluates one output filtered over `fp`.
+    pub fn eval_output(&self, output: OutputId, fp: &Footprint, scratch: &mut EvalScratch) -> Filtered {
+        self.eval_output_with(output, fp, scratch, &NoOverride)
+    }
+
+    /// Evaluates one output filtered over `fp`, asking `ov` for node values first.
+    pub fn eval_output_with(
+        &self,
+        output: OutputId,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+    ) -> Filtered {
+        let o = self.output(output);
+        if let Source::Node { node, .. } = o.source {
+            let plan = self.node_plan(node);
+            for &n in plan {
+                scratch.needed[n.0 as usize] = false;
+            }
+            scratch.needed[node.0 as usize] = true;
+            self.run(plan, None, fp, scratch, ov);
+        }
+        let mut v = self.resolve(&o.source, fp, is_point(fp), scratch);
+        v.ty = o.ty;
+        v
+    }
+
+    /// Evaluates `node` itself filtered over `fp` (never replaced by `ov`), its inputs through
+    /// `ov`. A tile fill calls this at texel centres with a one-texel footprint.
+    pub fn eval_node_direct(
+        &self,
+        node: NodeId,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+    ) -> Filtered {
+        let plan = self.node_plan(node);
+        for &n in plan {
+            scratch.needed[n.0 as usize] = false;
+        }
+        scratch.needed[node.0 as usize] = true;
+        self.run(plan, Some(node), fp, scratch, ov);
+        scratch.values[node.0 as usize]
+    }
+
+    fn run(
+        &self,
+        plan: &[NodeId],
+        direct: Option<NodeId>,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+    ) {
+        scratch.order.clear();
+        for &id in plan.iter().rev() {
+            let i = id.0 as usize;
+            if !scratch.needed[i] {
+                continue;
+            }
+            if direct != Some(id) {
+                if let Some(v) = ov.lookup(id, fp) {
+                    scratch.values[i] = v;
+                    scratch.lookups[i] += 1;
+                    continue;
+                }
+            }
+            scratch.order.push(id);
+            for s in &self.nodes[i].inputs {
+                if let Source::Node { node, .. } = s {
+                    scratch.needed[node.0 as usize] = true;
+                }
+            }
+        }
+        let point = is_point(fp);
+        let mut ins = [Filtered::zero(ValueType::Float); 12];
+        for k in (0..scratch.order.len()).rev() {
+            let id = scratch.order[k];
+            let node = &self.nodes[id.0 as usize];
+            for (slot, s) in ins.iter_mut().zip(&node.inputs) {
+                *slot = self.resolve(s, fp, point, scratch);
+            }
+            let n_in = node.inputs.len();
+            let mut ctx = Ctx { fp, point, work: &mut scratch.work };
+            let v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
+            scratch.values[id.0 as usize] = v;
+            scratch.evaluations[id.0 as usize] += 1;
+        }
+    }
+
+    fn resolve(&self, s: &Source, fp: &Footprint, point: bool, scratch: &mut EvalScratch) -> Filtered {
+        match s {
+            Source::Constant(v) => Filtered::constant(*v),
+            Source::Texcoord => {
+                let mut w = Work::default();
+                geometry::texcoord(&Ctx { fp, point, work: &mut w })
+            }
+            Source::Node { node, channel } => {
+                let v = scratch.values[node.0 as usize];
+                match channel {
+                    None => v,
+                    Some(c) => {
+                        let mut f = Filtered::zero(ValueType::Float);
+                        f.ch[0] = v.ch[*c as usize];
+                        f
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[inline]
+fn is_point(fp: &Footprint) -> bool {
+    fp.cov == Mat2::ZERO
+}

@@ -1,0 +1,183 @@
+//! Propagating [`Moments`] through arithmetic: the algebra that linear and nonlinear nodes share.
+//!
+//! Linear maps are exact: means and gradients map linearly, variances by `k² var` plus the
+//! covariance of the two operands, which we estimate from their gradients (`gₐ Σ g_bᵀ`, clamped
+//! to the Cauchy–Schwarz bound) — exact for affine functions of uv, and zero for operands that
+//! merely look independent. Products use the Gaussian product moments. Nonlinear functions of
+//! one channel use closed forms or a Gauss–Hermite rule ([`unary`]); of several channels a
+//! spherical cubature over their (assumed independent) spreads ([`nary`]).
+
+use crate::gaussian;
+use crate::value::{Footprint, Moments};
+use glam::Vec2;
+
+/// Estimated covariance of two channels over the footprint.
+#[inline]
+pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
+    let c = fp.quad(a.grad, b.grad);
+    let bound = (a.var.max(0.0) * b.var.max(0.0)).sqrt();
+    c.clamp(-bound, bound)
+}
+
+/// `k a + c`.
+#[inline]
+pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
+    Moments { mean: k * a.mean + c, grad: a.grad * k, var: k * k * a.var }
+}
+
+/// `a + k b`.
+#[inline]
+pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
+    let c = cov(&a, &b, fp);
+    Moments {
+        mean: a.mean + k * b.mean,
+        grad: a.grad + b.grad * k,
+        var: (a.var + k * k * b.var + 2.0 * k * c).max(0.0),
+    }
+}
+
+/// `a · b` for jointly Gaussian operands.
+#[inline]
+pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
+    if b.var == 0.0 && b.grad == Vec2::ZERO {
+        return affine(a, b.mean, 0.0);
+    }
+    if a.var == 0.0 && a.grad == Vec2::ZERO {
+        return affine(b, a.mean, 0.0);
+    }
+    let c = cov(&a, &b, fp);
+    Moments {
+        mean: a.mean * b.mean + c,
+        grad: a.grad * b.mean + b.grad * a.mean,
+        var: (a.mean * a.mean * b.var + b.mean * b.mean * a.var + 2.0 * a.mean * b.mean * c + a.var * b.var + c * c)
+            .max(0.0),
+    }
+}
+
+/// `bg + (fg − bg) t`.
+#[inline]
+pub fn mix(bg: Moments, fg: Moments, t: Moments, fp: &Footprint) -> Moments {
+    let d = add_scaled(fg, bg, -1.0, fp);
+    add_scaled(bg, mul(d, t, fp), 1.0, fp)
+}
+
+/// Moments of `f(X)` from mean, variance and `dE/dm` of a scalar function, chaining the
+/// gradient through `x`'s.
+#[inline]
+pub fn chain(x: Moments, (mean, var, dmean): (f64, f64, f64)) -> Moments {
+    Moments { mean: mean as f32, grad: x.grad * dmean as f32, var: var as f32 }
+}
+
+/// A nonlinear function of one channel, `f`, with its derivative `df` (for the point case):
+/// mean and variance by 5-point Gauss–Hermite, `dE/dm` by Stein's identity
+/// `E[f'(X)] = E[(X − m) f(X)] / s²` on the same nodes.
+pub fn unary(x: Moments, f: impl Fn(f64) -> f64, df: impl Fn(f64) -> f64) -> Moments {
+    let m = x.mean as f64;
+    let s = x.sigma() as f64;
+    if s == 0.0 {
+        return Moments { mean: f(m) as f32, grad: x.grad * df(m) as f32, var: 0.0 };
+    }
+    let (mut e, mut e2, mut ez) = (0.0, 0.0, 0.0);
+    for (z, w) in gaussian::HERMITE5 {
+        let y = f(m + s * z);
+        e += w * y;
+        e2 += w * y * y;
+        ez += w * z * y;
+    }
+    chain(x, (e, (e2 - e * e).max(0.0), ez / s))
+}
+
+/// Maximum number of channels [`nary`] combines.
+pub const NARY_MAX: usize = 16;
+
+/// A nonlinear function of several channels: spherical cubature (points `m ± √n σ_k e_k`,
+/// weights `1/2n`) over the channels that vary, treated as independent; exact for cubic `f`.
+/// The gradient is the chain rule with slopes from the same points (finite differences of
+/// width `1e-3` where a channel has a gradient but no spread).
+pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
+    debug_assert!(xs.len() <= NARY_MAX);
+    let mut p = [0.0f64; NARY_MAX];
+    for (pi, x) in p.iter_mut().zip(xs) {
+        *pi = x.mean as f64;
+    }
+    let n = xs.len();
+    let varying = xs.iter().filter(|x| x.var > 0.0).count();
+    let f0 = f(&p[..n]);
+    let mut grad = Vec2::ZERO;
+    if varying == 0 {
+        for k in 0..n {
+            if xs[k].grad != Vec2::ZERO {
+                let h = 1e-3 * (1.0 + p[k].abs());
+                let mk = p[k];
+                p[k] = mk + h;
+                let fp = f(&p[..n]);
+                p[k] = mk - h;
+                let fm = f(&p[..n]);
+                p[k] = mk;
+                grad += xs[k].grad * ((fp - fm) / (2.0 * h)) as f32;
+            }
+        }
+        return Moments { mean: f0 as f32, grad, var: 0.0 };
+    }
+    let r = (varying as f64).sqrt();
+    let w = 0.5 / varying as f64;
+    let (mut e, mut e2) = (0.0, 0.0);
+    for k in 0..n {
+        if xs[k].var <= 0.0 {
+            continue;
+        }
+        let d = r * xs[k].sigma() as f64;
+        let mk = p[k];
+        p[k] = mk + d;
+        let fp = f(&p[..n]);
+        p[k] = mk - d;
+        let fm = f(&p[..n]);
+        p[k] = mk;
+        e += w * (fp + fm);
+        e2 += w * (fp * fp + fm * fm);
+        grad += xs[k].grad * ((fp - fm) / (2.0 * d)) as f32;
+    }
+    Moments { mean: e as f32, grad, var: (e2 - e * e).max(0.0) as f32 }
+}
+
+/// `E`, `E²` and `dE/dm` of `frac(X)` (`x − floor x`).
+pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
+    use std::f64::consts::PI;
+    if s <= 0.0 {
+        let f = m - m.floor();
+        return (f, f * f, 1.0);
+    }
+    if s < 0.4 {
+        let lo = (m - 7.0 * s).floor();
+        let hi = (m + 7.0 * s).floor();
+        let (mut e, mut e2, mut de) = (0.0, 0.0, 0.0);
+        let mut k = lo;
+        while k <= hi {
+            // frac = x − k on [k, k+1).
+            let p1 = gaussian::poly(&[-k, 1.0]);
+            let p2 = gaussian::poly(&[k * k, -2.0 * k, 1.0]);
+            e += gaussian::poly_expectation(&p1, k, k + 1.0, m, s);
+            e2 += gaussian::poly_expectation(&p2, k, k + 1.0, m, s);
+            // d/dm: slope 1 inside, minus the jump of 1 at each integer k+1 weighted by density.
+            de += gaussian::mass((k - m) / s, (k + 1.0 - m) / s) - gaussian::pdf((k + 1.0 - m) / s) / s;
+            k += 1.0;
+        }
+        (e, e2, de)
+    } else {
+        // frac(x) = 1/2 − Σ sin(2πnx)/(πn);  frac² = 1/3 + Σ [cos(2πnx)/(π²n²) − sin(2πnx)/(πn)].
+        let (mut e, mut e2, mut de) = (0.5, 1.0 / 3.0, 0.0);
+        for n in 1..=4 {
+            let nf = n as f64;
+            let w = 2.0 * PI * nf;
+            let att = (-0.5 * w * w * s * s).exp();
+            if att < 1e-12 {
+                break;
+            }
+            let (sn, cs) = (w * m).sin_cos();
+            e -= sn * att / (PI * nf);
+            e2 += (cs / (PI * PI * nf * nf) - sn / (PI * nf)) * att;
+            de -= w * cs * att / (PI * nf);
+        }
+        (e, e2, de)
+    }
+}

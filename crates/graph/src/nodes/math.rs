@@ -1,0 +1,609 @@
+//! Math and conditional nodes, per channel (a float second operand is broadcast).
+//!
+//! | node | inputs (default) | filtered evaluation |
+//! |---|---|---|
+//! | `add`, `subtract` | `in1` (0), `in2` (0) | exact (covariance of the operands from their gradients) |
+//! | `multiply` | `in1` (0), `in2` (1) | exact for a uniform factor; Gaussian product moments otherwise |
+//! | `divide` | `in1` (0), `in2` (1) | exact for a uniform divisor; cubature otherwise |
+//! | `invert` | `in` (0), `amount` (1) | exact (`amount − in`) |
+//! | `remap` | `in` (0), `inlow` (0), `inhigh` (1), `outlow` (0), `outhigh` (1) | exact for uniform ranges; cubature otherwise |
+//! | `range` | `in`, `inlow` (0), `inhigh` (1), `gamma` (1), `outlow` (0), `outhigh` (1), `doclamp` (false) | Gauss–Hermite on the remapped value (exact when `gamma` = 1 and no clamp) |
+//! | `absval`, `clamp`, `min`, `max` (uniform bound), `smoothstep` (uniform edges) | `in`/`in1`, bounds | closed form: piecewise polynomial × Gaussian |
+//! | `min`, `max` (two varying operands) | `in1`, `in2` (0) | Clark's max of two Gaussians |
+//! | `floor`, `ceil`, `round`, `fract`, `modulo` | `in`/`in1`, `in2` (1) | closed form: step masses (σ < 0.4 periods) or damped Fourier series of the sawtooth |
+//! | `sign` | `in` (0) | `2Φ(m/σ) − 1` |
+//! | `sin`, `cos` | `in` (0) | closed form (`e^{−σ²/2}` damping) |
+//! | `exp` | `in` (0) | closed form (log-normal) |
+//! | `sqrt`, `ln` (`in` = 1), `power` (`in2` = 1), `tan`, `asin`, `acos` | | 5-point Gauss–Hermite (uniform exponent), cubature otherwise |
+//! | `atan2` | `iny` (0), `inx` (1) | cubature |
+//! | `dotproduct`, `magnitude`, `distance`, `normalize` | vectors | exact for a uniform operand of `dotproduct`; cubature otherwise |
+//! | `ifgreater`, `ifgreatereq`, `ifequal` | `value1` (1), `value2` (0), `in1` (0), `in2` (0) | `mix(in2, in1, P(value1 > value2))` with the probability from the difference's Gaussian; boolean variants output the probability itself |
+//!
+//! Cubature and Hermite rules treat channels as Gaussian and independent; at Σ = 0 every rule
+//! reduces to the plain function of the inputs.
+
+use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
+use crate::gaussian::{self, poly, poly_shift_scale, Piece};
+use crate::graph::Source;
+use crate::moments::{add_scaled, affine, chain, frac_moments, mix, mul, nary, unary};
+use crate::value::{Filtered, Footprint, Moments, ValueType};
+use glam::Vec2;
+
+pub(crate) const CATEGORIES: &[&str] = &[
+    "add",
+    "subtract",
+    "multiply",
+    "divide",
+    "modulo",
+    "fract",
+    "invert",
+    "absval",
+    "sign",
+    "floor",
+    "ceil",
+    "round",
+    "power",
+    "safepower",
+    "sin",
+    "cos",
+    "tan",
+    "asin",
+    "acos",
+    "atan2",
+    "sqrt",
+    "ln",
+    "exp",
+    "clamp",
+    "min",
+    "max",
+    "smoothstep",
+    "remap",
+    "range",
+    "mix",
+    "dotproduct",
+    "magnitude",
+    "distance",
+    "normalize",
+    "ifgreater",
+    "ifgreatereq",
+    "ifequal",
+];
+
+/// Math operations.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MathOp {
+    /// add
+    Add,
+    /// subtract
+    Subtract,
+    /// multiply
+    Multiply,
+    /// divide
+    Divide,
+    /// modulo
+    Modulo,
+    /// fract
+    Fract,
+    /// invert
+    Invert,
+    /// absval
+    Absval,
+    /// sign
+    Sign,
+    /// floor
+    Floor,
+    /// ceil
+    Ceil,
+    /// round
+    Round,
+    /// power
+    Power,
+    /// safepower
+    SafePower,
+    /// sin
+    Sin,
+    /// cos
+    Cos,
+    /// tan
+    Tan,
+    /// asin
+    Asin,
+    /// acos
+    Acos,
+    /// atan2
+    Atan2,
+    /// sqrt
+    Sqrt,
+    /// ln
+    Ln,
+    /// exp
+    Exp,
+    /// clamp
+    Clamp,
+    /// min
+    Min,
+    /// max
+    Max,
+    /// smoothstep
+    Smoothstep,
+    /// remap
+    Remap,
+    /// range
+    Range,
+    /// mix
+    Mix,
+    /// dotproduct
+    Dot,
+    /// magnitude
+    Magnitude,
+    /// distance
+    Distance,
+    /// normalize
+    Normalize,
+    /// ifgreater
+    IfGreater,
+    /// ifgreatereq
+    IfGreaterEq,
+    /// ifequal
+    IfEqual,
+}
+
+pub(crate) fn definition(category: &str) -> Option<NodeDef> {
+    use Def::*;
+    use InType::*;
+    let unary_in: &'static [super::InputSpec] = &[inp!("in", Out, Zero)];
+    let (inputs, ty): (&'static [_], fn(ValueType) -> bool) = match category {
+        "add" | "subtract" | "min" | "max" => {
+            (&[inp!("in1", Out, Zero), inp!("in2", OutOrFloat, Zero)], types::numeric)
+        }
+        "multiply" | "divide" | "modulo" | "power" | "safepower" => {
+            (&[inp!("in1", Out, Zero), inp!("in2", OutOrFloat, One)], types::numeric)
+        }
+        // floor/ceil/round also have integer-output variants of a float input.
+        "floor" | "ceil" | "round" => (&[inp!("in", OutOrFloat, Zero)], types::numeric),
+        "fract" | "absval" | "sign" | "sin" | "cos" | "tan" | "asin" | "acos" | "sqrt" | "exp" | "normalize" => {
+            (unary_in, types::numeric)
+        }
+        "ln" => (&[inp!("in", Out, One)], types::numeric),
+        "invert" => (&[inp!("in", Out, Zero), inp!("amount", OutOrFloat, One)], types::numeric),
+        "atan2" => (&[inp!("iny", Out, Zero), inp!("inx", Out, One)], types::numeric),
+        "clamp" => {
+            (&[inp!("in", Out, Zero), inp!("low", OutOrFloat, Zero), inp!("high", OutOrFloat, One)], types::numeric)
+        }
+        "smoothstep" => {
+            (&[inp!("in", Out, Zero), inp!("low", OutOrFloat, Zero), inp!("high", OutOrFloat, One)], types::numeric)
+        }
+        "remap" => (
+            &[
+                inp!("in", Out, Zero),
+                inp!("inlow", OutOrFloat, Zero),
+                inp!("inhigh", OutOrFloat, One),
+                inp!("outlow", OutOrFloat, Zero),
+                inp!("outhigh", OutOrFloat, One),
+            ],
+            types::numeric,
+        ),
+        "range" => (
+            &[
+                inp!("in", Out, Zero),
+                inp!("inlow", OutOrFloat, Zero),
+                inp!("inhigh", OutOrFloat, One),
+                inp!("gamma", OutOrFloat, One),
+                inp!("outlow", OutOrFloat, Zero),
+                inp!("outhigh", OutOrFloat, One),
+                inp!("doclamp", Bool, Zero),
+            ],
+            types::numeric,
+        ),
+        "mix" => (&[inp!("fg", Out, Zero), inp!("bg", Out, Zero), inp!("mix", OutOrFloat, Zero)], types::numeric),
+        "dotproduct" | "distance" => (&[inp!("in1", Any, Zero), inp!("in2", SameAs(0), Zero)], types::float),
+        "magnitude" => (&[inp!("in", Any, Zero)], types::float),
+        "ifgreater" | "ifgreatereq" | "ifequal" => (
+            &[
+                inp!("value1", Scalar, One),
+                inp!("value2", SameAs(0), Zero),
+                inp!("in1", Out, Zero),
+                inp!("in2", Out, Zero),
+            ],
+            types::numeric,
+        ),
+        _ => return None,
+    };
+    let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
+    Some(NodeDef { category, inputs, params: &[], types: ty, build })
+}
+
+fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param]) -> Result<Op, String> {
+    use MathOp::*;
+    Ok(Op::Math(match category {
+        "add" => Add,
+        "subtract" => Subtract,
+        "multiply" => Multiply,
+        "divide" => Divide,
+        "modulo" => Modulo,
+        "fract" => Fract,
+        "invert" => Invert,
+        "absval" => Absval,
+        "sign" => Sign,
+        "floor" => Floor,
+        "ceil" => Ceil,
+        "round" => Round,
+        "power" => Power,
+        "safepower" => SafePower,
+        "sin" => Sin,
+        "cos" => Cos,
+        "tan" => Tan,
+        "asin" => Asin,
+        "acos" => Acos,
+        "atan2" => Atan2,
+        "sqrt" => Sqrt,
+        "ln" => Ln,
+        "exp" => Exp,
+        "clamp" => Clamp,
+        "min" => Min,
+        "max" => Max,
+        "smoothstep" => Smoothstep,
+        "remap" => Remap,
+        "range" => Range,
+        "mix" => Mix,
+        "dotproduct" => Dot,
+        "magnitude" => Magnitude,
+        "distance" => Distance,
+        "normalize" => Normalize,
+        "ifgreater" => IfGreater,
+        "ifgreatereq" => IfGreaterEq,
+        _ => IfEqual,
+    }))
+}
+
+#[inline]
+fn uniform(m: &Moments) -> bool {
+    m.var == 0.0 && m.grad == Vec2::ZERO
+}
+
+fn pieces_of(x: Moments, pieces: &[Piece]) -> Moments {
+    chain(x, gaussian::piecewise_moments(pieces, x.mean as f64, x.sigma() as f64))
+}
+
+/// `clamp(x, lo, hi)` for uniform bounds.
+fn clamp_const(x: Moments, lo: f64, hi: f64) -> Moments {
+    if hi < lo {
+        return Moments::constant(hi as f32);
+    }
+    pieces_of(
+        x,
+        &[
+            Piece { lo: f64::NEG_INFINITY, hi: lo, p: poly(&[lo]) },
+            Piece { lo, hi, p: poly(&[0.0, 1.0]) },
+            Piece { lo: hi, hi: f64::INFINITY, p: poly(&[hi]) },
+        ],
+    )
+}
+
+/// GLSL `smoothstep(lo, hi, x)` for uniform edges.
+fn smoothstep_const(x: Moments, lo: f64, hi: f64) -> Moments {
+    if hi <= lo {
+        return gaussian_step(x, lo);
+    }
+    // 3t² − 2t³ with t = (x − lo)/(hi − lo).
+    let w = 1.0 / (hi - lo);
+    let p = poly_shift_scale(&poly(&[0.0, 0.0, 3.0, -2.0]), -lo * w, w);
+    pieces_of(x, &[Piece { lo, hi, p }, Piece { lo: hi, hi: f64::INFINITY, p: poly(&[1.0]) }])
+}
+
+fn gaussian_step(x: Moments, c: f64) -> Moments {
+    chain(x, gaussian::step_moments(c, x.mean as f64, x.sigma() as f64))
+}
+
+/// `max(a, b)` of two Gaussians (Clark 1961): `b + E[max(a − b, 0)]`.
+fn max2(a: Moments, b: Moments, fp: &Footprint) -> Moments {
+    if uniform(&b) {
+        let c = b.mean as f64;
+        return pieces_of(
+            a,
+            &[
+                Piece { lo: f64::NEG_INFINITY, hi: c, p: poly(&[c]) },
+                Piece { lo: c, hi: f64::INFINITY, p: poly(&[0.0, 1.0]) },
+            ],
+        );
+    }
+    if uniform(&a) {
+        return max2(b, a, fp);
+    }
+    let d = add_scaled(a, b, -1.0, fp);
+    let relu = pieces_of(d, &[Piece { lo: 0.0, hi: f64::INFINITY, p: poly(&[0.0, 1.0]) }]);
+    add_scaled(b, relu, 1.0, fp)
+}
+
+fn min2(a: Moments, b: Moments, fp: &Footprint) -> Moments {
+    affine(max2(affine(a, -1.0, 0.0), affine(b, -1.0, 0.0), fp), -1.0, 0.0)
+}
+
+fn floor_of(x: Moments) -> Moments {
+    let (m, s) = (x.mean as f64, x.sigma() as f64);
+    let (e, e2, de) = frac_moments(m, s);
+    // floor = x − frac; Var ≈ s² + Var[frac] − 2 Cov(x, frac), Cov(x, frac) = s² E[frac'] (Stein).
+    let vfrac = (e2 - e * e).max(0.0);
+    let var = (s * s + vfrac - 2.0 * s * s * de).max(0.0);
+    Moments { mean: (m - e) as f32, grad: x.grad * (1.0 - de) as f32, var: var as f32 }
+}
+
+fn fract_of(x: Moments) -> Moments {
+    let (e, e2, de) = frac_moments(x.mean as f64, x.sigma() as f64);
+    Moments { mean: e as f32, grad: x.grad * de as f32, var: (e2 - e * e).max(0.0) as f32 }
+}
+
+fn sin_of(x: Moments, cosine: bool) -> Moments {
+    let (m, s) = (x.mean as f64, x.sigma() as f64);
+    let shift = if cosine { std::f64::consts::FRAC_PI_2 } else { 0.0 };
+    let (e, de) = gaussian::sin_cos_expectation(m + shift, s);
+    // E[sin²] = (1 − E[cos 2X]) / 2.
+    let (_, c2) = gaussian::sin_cos_expectation(2.0 * (m + shift), 2.0 * s);
+    let var = ((1.0 - c2) / 2.0 - e * e).max(0.0);
+    Moments { mean: e as f32, grad: x.grad * de as f32, var: var as f32 }
+}
+
+fn exp_of(x: Moments) -> Moments {
+    let (m, v) = (x.mean as f64, x.var as f64);
+    let e = (m + 0.5 * v).exp();
+    Moments { mean: e as f32, grad: x.grad * e as f32, var: (((v).exp() - 1.0) * e * e) as f32 }
+}
+
+/// GLSL-style `mod(x, y) = x − y floor(x / y)`.
+fn modulo(a: Moments, b: Moments, fp: &Footprint) -> Moments {
+    if uniform(&b) && b.mean != 0.0 {
+        let q = floor_of(affine(a, 1.0 / b.mean, 0.0));
+        return add_scaled(a, q, -b.mean, fp);
+    }
+    nary(&[a, b], |p| p[0] - p[1] * (p[0] / p[1]).floor())
+}
+
+fn power(a: Moments, b: Moments, safe: bool) -> Moments {
+    let f = move |x: f64, y: f64| {
+        if safe {
+            x.signum() * x.abs().powf(y)
+        } else {
+            x.powf(y)
+        }
+    };
+    if uniform(&b) {
+        let y = b.mean as f64;
+        unary(a, move |x| f(x, y), move |x| if x == 0.0 { 0.0 } else { y * f(x, y) / x })
+    } else {
+        nary(&[a, b], move |p| f(p[0], p[1]))
+    }
+}
+
+/// One channel of a per-channel math node; `ins` are the node's inputs at channel `k`.
+fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
+    use MathOp::*;
+    let a = x[0];
+    match op {
+        Add => add_scaled(a, x[1], 1.0, fp),
+        Subtract => add_scaled(a, x[1], -1.0, fp),
+        Multiply => mul(a, x[1], fp),
+        Divide => {
+            if uniform(&x[1]) {
+                affine(a, 1.0 / x[1].mean, 0.0)
+            } else {
+                nary(&[a, x[1]], |p| p[0] / p[1])
+            }
+        }
+        Modulo => modulo(a, x[1], fp),
+        Fract => fract_of(a),
+        Invert => add_scaled(x[1], a, -1.0, fp),
+        Absval => pieces_of(
+            a,
+            &[
+                Piece { lo: f64::NEG_INFINITY, hi: 0.0, p: poly(&[0.0, -1.0]) },
+                Piece { lo: 0.0, hi: f64::INFINITY, p: poly(&[0.0, 1.0]) },
+            ],
+        ),
+        Sign => {
+            if a.var == 0.0 {
+                Moments::constant(if a.mean > 0.0 {
+                    1.0
+                } else if a.mean < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                })
+            } else {
+                affine(gaussian_step(a, 0.0), 2.0, -1.0)
+            }
+        }
+        Floor => floor_of(a),
+        Ceil => affine(floor_of(affine(a, -1.0, 0.0)), -1.0, 0.0),
+        // GLSL's round (MaterialX's bakes) sends halves to the even integer.
+        Round if a.var == 0.0 => Moments::constant((a.mean as f64).round_ties_even() as f32),
+        Round => floor_of(affine(a, 1.0, 0.5)),
+        Power => power(a, x[1], false),
+        SafePower => power(a, x[1], true),
+        Sin => sin_of(a, false),
+        Cos => sin_of(a, true),
+        Tan => unary(a, f64::tan, |v| 1.0 / (v.cos() * v.cos())),
+        Asin => unary(a, |v| v.clamp(-1.0, 1.0).asin(), |v| 1.0 / (1.0 - v * v).max(1e-12).sqrt()),
+        Acos => unary(a, |v| v.clamp(-1.0, 1.0).acos(), |v| -1.0 / (1.0 - v * v).max(1e-12).sqrt()),
+        Atan2 => nary(&[a, x[1]], |p| p[0].atan2(p[1])),
+        Sqrt => unary(a, |v| v.max(0.0).sqrt(), |v| if v > 0.0 { 0.5 / v.sqrt() } else { 0.0 }),
+        Ln => unary(a, |v| v.max(1e-30).ln(), |v| 1.0 / v.max(1e-30)),
+        Exp => exp_of(a),
+        Clamp => {
+            if uniform(&x[1]) && uniform(&x[2]) {
+                clamp_const(a, x[1].mean as f64, x[2].mean as f64)
+            } else {
+                min2(max2(a, x[1], fp), x[2], fp)
+            }
+        }
+        Min => min2(a, x[1], fp),
+        Max => max2(a, x[1], fp),
+        Smoothstep => {
+            if uniform(&x[1]) && uniform(&x[2]) {
+                smoothstep_const(a, x[1].mean as f64, x[2].mean as f64)
+            } else {
+                nary(&[a, x[1], x[2]], |p| smoothstep_point(p[0], p[1], p[2]))
+            }
+        }
+        Remap => {
+            if x[1..5].iter().all(uniform) {
+                let (il, ih, ol, oh) = (x[1].mean, x[2].mean, x[3].mean, x[4].mean);
+                let k = (oh - ol) / (ih - il);
+                affine(a, k, ol - il * k)
+            } else {
+                nary(&x[..5], |p| p[3] + (p[0] - p[1]) * (p[4] - p[3]) / (p[2] - p[1]))
+            }
+        }
+        Range => {
+            let doclamp = x[6].mean >= 0.5;
+            let f = move |p: &[f64]| {
+                let t = (p[0] - p[1]) / (p[2] - p[1]);
+                let t = t.signum() * t.abs().powf(1.0 / p[3]);
+                let r = p[4] + t * (p[5] - p[4]);
+                if doclamp {
+                    r.clamp(p[4].min(p[5]), p[4].max(p[5]))
+                } else {
+                    r
+                }
+            };
+            if x[1..6].iter().all(uniform) {
+                let p: [f64; 6] =
+                    [0.0, x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64, x[5].mean as f64];
+                if p[3] == 1.0 && !doclamp {
+                    let k = ((p[5] - p[4]) / (p[2] - p[1])) as f32;
+                    return affine(a, k, p[4] as f32 - p[1] as f32 * k);
+                }
+                unary(
+                    a,
+                    move |v| {
+                        let mut q = p;
+                        q[0] = v;
+                        f(&q)
+                    },
+                    move |v| {
+                        let h = 1e-4 * (1.0 + v.abs());
+                        let (mut q0, mut q1) = (p, p);
+                        q0[0] = v - h;
+                        q1[0] = v + h;
+                        (f(&q1) - f(&q0)) / (2.0 * h)
+                    },
+                )
+            } else {
+                nary(&x[..6], f)
+            }
+        }
+        Mix => mix(x[1], a, x[2], fp),
+        IfGreater | IfGreaterEq | IfEqual => unreachable!("conditionals are evaluated per node"),
+        Dot | Magnitude | Distance | Normalize => unreachable!("vector ops are evaluated per node"),
+    }
+}
+
+fn smoothstep_point(x: f64, lo: f64, hi: f64) -> f64 {
+    if x >= hi {
+        1.0
+    } else if x <= lo {
+        0.0
+    } else {
+        let t = (x - lo) / (hi - lo);
+        t * t * (3.0 - 2.0 * t)
+    }
+}
+
+/// Probability moments of the condition of `ifgreater` & co.
+fn condition(op: MathOp, v1: Moments, v2: Moments, fp: &Footprint, integral: bool) -> Moments {
+    let d = add_scaled(v1, v2, -1.0, fp);
+    let (m, s) = (d.mean as f64, d.sigma() as f64);
+    match op {
+        MathOp::IfEqual => {
+            if s == 0.0 {
+                return Moments::constant(if d.mean == 0.0 { 1.0 } else { 0.0 });
+            }
+            let h = if integral { 0.5 } else { 0.0 };
+            let p = gaussian::mass((-h - m) / s, (h - m) / s);
+            Moments { mean: p as f32, grad: Vec2::ZERO, var: (p * (1.0 - p)) as f32 }
+        }
+        _ => {
+            if s == 0.0 {
+                let t = if op == MathOp::IfGreater { d.mean > 0.0 } else { d.mean >= 0.0 };
+                return Moments::constant(if t { 1.0 } else { 0.0 });
+            }
+            gaussian_step(d, 0.0)
+        }
+    }
+}
+
+fn vector_op(op: MathOp, ins: &[Filtered], fp: &Footprint) -> Filtered {
+    let mut out = Filtered::zero(ValueType::Float);
+    let a = &ins[0];
+    let n = a.n();
+    match op {
+        MathOp::Dot => {
+            let b = &ins[1];
+            let mut acc = Moments::default();
+            for k in 0..n {
+                acc = add_scaled(acc, mul(a.ch[k], b.at(k), fp), 1.0, fp);
+            }
+            out.ch[0] = acc;
+        }
+        MathOp::Magnitude => {
+            out.ch[0] = nary(&a.ch[..n], |p| p.iter().map(|v| v * v).sum::<f64>().sqrt());
+        }
+        MathOp::Distance => {
+            let mut d = [Moments::default(); 4];
+            for k in 0..n {
+                d[k] = add_scaled(a.ch[k], ins[1].at(k), -1.0, fp);
+            }
+            out.ch[0] = nary(&d[..n], |p| p.iter().map(|v| v * v).sum::<f64>().sqrt());
+        }
+        _ => unreachable!(),
+    }
+    out
+}
+
+pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let fp = ctx.fp;
+    let n = ty.channels();
+    let mut out = Filtered::zero(ty);
+    match op {
+        MathOp::Dot | MathOp::Magnitude | MathOp::Distance => out = vector_op(*op, ins, fp),
+        MathOp::Normalize => {
+            let a = &ins[0];
+            for k in 0..n {
+                out.ch[k] = nary(&a.ch[..n], |p| {
+                    let l = p.iter().map(|v| v * v).sum::<f64>().sqrt();
+                    if l > 0.0 {
+                        p[k] / l
+                    } else {
+                        0.0
+                    }
+                });
+            }
+        }
+        MathOp::IfGreater | MathOp::IfGreaterEq | MathOp::IfEqual => {
+            let integral = ins[0].ty != ValueType::Float;
+            let p = condition(*op, ins[0].ch[0], ins[1].ch[0], fp, integral);
+            if ty == ValueType::Boolean {
+                // The boolean variants output the comparison itself.
+                out.ch[0] = p;
+                return out;
+            }
+            for k in 0..n {
+                out.ch[k] = mix(ins[3].at(k), ins[2].at(k), p, fp);
+            }
+        }
+        _ => {
+            let mut xs = [Moments::default(); 8];
+            for k in 0..n {
+                for (x, i) in xs.iter_mut().zip(ins.iter()) {
+                    *x = i.at(k);
+                }
+                out.ch[k] = channel(*op, &xs[..ins.len()], fp);
+            }
+        }
+    }
+    if ctx.point {
+        for c in out.ch.iter_mut() {
+            c.grad = Vec2::ZERO;
+        }
+    }
+    out
+}

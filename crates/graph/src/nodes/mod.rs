@@ -1,0 +1,299 @@
+//! The node library: one file per node family, each with a table of its inputs.
+//!
+//! [`definition`] maps a MaterialX category to its [`NodeDef`]: the inputs in order with their
+//! types and nodedef defaults (hard-coded from the MaterialX 1.39 Standard Nodes spec), the
+//! output types it accepts, and how to build its [`Op`]. [`eval`] dispatches a filtered
+//! evaluation to the family.
+
+pub(crate) mod channel;
+pub(crate) mod color;
+pub(crate) mod geometry;
+pub(crate) mod hash;
+pub(crate) mod image;
+pub(crate) mod math;
+pub(crate) mod noise;
+pub(crate) mod pattern;
+
+use crate::eval::Work;
+use crate::graph::Source;
+use crate::value::{Filtered, Footprint, Value, ValueType};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// A uniform string-like input of a node (file names, address modes, ...).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Param {
+    /// An image file, resolved to a path, with its declared colour space.
+    File {
+        /// Input name.
+        name: String,
+        /// Resolved path.
+        path: PathBuf,
+        /// `colorspace` attribute (e.g. `srgb_texture`), empty if none.
+        colorspace: String,
+    },
+    /// Any other string input.
+    Str {
+        /// Input name.
+        name: String,
+        /// Its value.
+        value: String,
+    },
+}
+
+/// The type rule of one input.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum InType {
+    /// Same type as the node's output.
+    Out,
+    /// Same as the output, or a float broadcast to every channel.
+    OutOrFloat,
+    /// `float`.
+    Float,
+    /// `integer`.
+    Int,
+    /// `boolean`.
+    Bool,
+    /// `float`, `integer` or `boolean`.
+    Scalar,
+    /// `vector2`.
+    V2,
+    /// `vector3`.
+    V3,
+    /// `color3`.
+    C3,
+    /// Any numeric type.
+    Any,
+    /// The type of input number `k`.
+    SameAs(usize),
+}
+
+/// A nodedef default.
+#[derive(Clone, Copy, Debug)]
+pub enum Def {
+    /// All channels 0.
+    Zero,
+    /// All channels 1.
+    One,
+    /// All channels 0.5.
+    Half,
+    /// All channels this value.
+    Splat(f32),
+    /// A vector2.
+    Pair(f32, f32),
+    /// A three-channel value.
+    Triple(f32, f32, f32),
+    /// The geometric texture coordinate `UV0`.
+    Uv,
+}
+
+/// One input of a node definition.
+#[derive(Clone, Copy, Debug)]
+pub struct InputSpec {
+    /// Input name.
+    pub name: &'static str,
+    /// Type rule.
+    pub ty: InType,
+    /// Default when omitted.
+    pub default: Def,
+}
+
+/// An [`InputSpec`] literal (a macro so that tables of them are promoted to statics).
+macro_rules! inp {
+    ($name:expr, $ty:expr, $default:expr) => {
+        $crate::nodes::InputSpec { name: $name, ty: $ty, default: $default }
+    };
+}
+pub(crate) use inp;
+
+impl InputSpec {
+    fn concrete_type(&self, node_ty: ValueType, earlier: &[ValueType]) -> ValueType {
+        match self.ty {
+            InType::Out | InType::OutOrFloat => node_ty,
+            InType::Float | InType::Scalar | InType::Any => ValueType::Float,
+            InType::Int => ValueType::Integer,
+            InType::Bool => ValueType::Boolean,
+            InType::V2 => ValueType::Vector2,
+            InType::V3 => ValueType::Vector3,
+            InType::C3 => ValueType::Color3,
+            InType::SameAs(k) => earlier.get(k).copied().unwrap_or(ValueType::Float),
+        }
+    }
+
+    /// The source an omitted input takes.
+    pub fn default_source_with(&self, node_ty: ValueType, earlier: &[ValueType]) -> Source {
+        let ty = self.concrete_type(node_ty, earlier);
+        let v = match self.default {
+            Def::Zero => Value::splat(ty, 0.0),
+            Def::One => Value::splat(ty, 1.0),
+            Def::Half => Value::splat(ty, 0.5),
+            Def::Splat(x) => Value::splat(ty, x),
+            Def::Pair(a, b) => Value::new(ValueType::Vector2, &[a, b]),
+            Def::Triple(a, b, c) => Value::new(ty, &[a, b, c]),
+            Def::Uv => return Source::Texcoord,
+        };
+        Source::Constant(v)
+    }
+
+    /// The source an omitted input takes (for inputs that do not depend on other inputs).
+    pub fn default_source(&self, node_ty: ValueType) -> Source {
+        self.default_source_with(node_ty, &[])
+    }
+
+    /// Whether a value of type `found` may connect here.
+    pub fn accepts_with(&self, node_ty: ValueType, found: ValueType, earlier: &[ValueType]) -> bool {
+        use ValueType::*;
+        match self.ty {
+            InType::Out => found == node_ty,
+            InType::OutOrFloat => found == node_ty || found == Float,
+            InType::Float => found == Float,
+            InType::Int => found == Integer,
+            InType::Bool => found == Boolean,
+            InType::Scalar => found.is_scalar(),
+            InType::V2 => found == Vector2,
+            InType::V3 => found == Vector3,
+            InType::C3 => found == Color3,
+            InType::Any => true,
+            InType::SameAs(k) => earlier.get(k).is_none_or(|t| *t == found),
+        }
+    }
+
+    /// Whether a value of type `found` may connect here (ignoring `SameAs` rules).
+    pub fn accepts(&self, node_ty: ValueType, found: ValueType) -> bool {
+        self.accepts_with(node_ty, found, &[])
+    }
+
+    /// Human-readable expected type.
+    pub fn expected(&self, node_ty: ValueType) -> String {
+        match self.ty {
+            InType::Out => node_ty.name().to_string(),
+            InType::OutOrFloat => format!("{node_ty} or float"),
+            InType::Scalar => "float, integer or boolean".into(),
+            InType::Any => "any".into(),
+            InType::SameAs(_) => "the type of the first input".into(),
+            _ => self.concrete_type(node_ty, &[]).name().to_string(),
+        }
+    }
+}
+
+/// Builds a node's [`Op`] from its output type, input types, input sources and parameters.
+pub type BuildFn = fn(&str, ValueType, &[ValueType], &[Source], &[Param]) -> Result<Op, String>;
+
+/// A node definition.
+pub struct NodeDef {
+    /// MaterialX category.
+    pub category: &'static str,
+    /// Inputs in evaluation order.
+    pub inputs: &'static [InputSpec],
+    /// String-valued inputs, kept as [`Param`]s.
+    pub params: &'static [&'static str],
+    /// Output types accepted.
+    pub types: fn(ValueType) -> bool,
+    /// Builds the operation.
+    pub build: BuildFn,
+}
+
+/// The operation of a node, grouped by family.
+#[derive(Debug)]
+pub enum Op {
+    /// `texcoord`, `constant`, `place2d`, `rotate2d`, `dot`.
+    Geometry(geometry::GeometryOp),
+    /// `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`.
+    Noise(noise::NoiseOp),
+    /// Shapes, ramps, splits, random values.
+    Pattern(pattern::PatternOp),
+    /// Math nodes.
+    Math(math::MathOp),
+    /// Channel nodes.
+    Channel(channel::ChannelOp),
+    /// Colour adjustment nodes.
+    Color(color::ColorOp),
+    /// `image`, `tiledimage`.
+    Image(Arc<image::Texture>),
+}
+
+/// Per-evaluation context handed to nodes.
+pub(crate) struct Ctx<'a> {
+    pub fp: &'a Footprint,
+    /// True when the footprint is a point (Σ = 0): gradients are not needed.
+    pub point: bool,
+    pub work: &'a mut Work,
+}
+
+/// Evaluates one node filtered, from its (already filtered) inputs.
+pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    match op {
+        Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
+        Op::Noise(n) => noise::eval(n, ty, ins, ctx),
+        Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
+        Op::Math(m) => math::eval(m, ty, ins, ctx),
+        Op::Channel(c) => channel::eval(c, ty, ins, ctx),
+        Op::Color(c) => color::eval(c, ty, ins, ctx),
+        Op::Image(t) => image::eval(t, ty, ins, ctx),
+    }
+}
+
+/// Every category this library supports.
+pub fn supported() -> Vec<&'static str> {
+    let mut v: Vec<&'static str> = Vec::new();
+    for f in [
+        geometry::CATEGORIES,
+        noise::CATEGORIES,
+        pattern::CATEGORIES,
+        math::CATEGORIES,
+        channel::CATEGORIES,
+        color::CATEGORIES,
+        image::CATEGORIES,
+    ] {
+        v.extend_from_slice(f);
+    }
+    v.sort_unstable();
+    v
+}
+
+/// Supported categories as one comma-separated line.
+pub fn supported_list() -> String {
+    supported().join(", ")
+}
+
+/// The definition of a category.
+pub fn definition(category: &str) -> Option<NodeDef> {
+    geometry::definition(category)
+        .or_else(|| noise::definition(category))
+        .or_else(|| pattern::definition(category))
+        .or_else(|| math::definition(category))
+        .or_else(|| channel::definition(category))
+        .or_else(|| color::definition(category))
+        .or_else(|| image::definition(category))
+}
+
+/// Input names of a category (empty if unknown).
+pub fn input_names(category: &str) -> Vec<&'static str> {
+    definition(category).map(|d| d.inputs.iter().map(|i| i.name).collect()).unwrap_or_default()
+}
+
+/// Output-type predicates used by definitions.
+pub(crate) mod types {
+    use crate::value::ValueType::{self, *};
+    pub fn numeric(_: ValueType) -> bool {
+        true
+    }
+    pub fn float(t: ValueType) -> bool {
+        t == Float
+    }
+    pub fn vector2(t: ValueType) -> bool {
+        t == Vector2
+    }
+    pub fn color3(t: ValueType) -> bool {
+        t == Color3
+    }
+    pub fn multichannel(t: ValueType) -> bool {
+        t.channels() > 1
+    }
+    pub fn float_or_vector(t: ValueType) -> bool {
+        matches!(t, Float | Vector2 | Vector3 | Vector4 | Color3 | Color4)
+    }
+    pub fn color(t: ValueType) -> bool {
+        matches!(t, Color3 | Color4)
+    }
+}

@@ -1,0 +1,710 @@
+//! Noise: `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`.
+//!
+//! | node | inputs (default) | unfiltered (MaterialX 1.39) | filtered evaluation |
+//! |---|---|---|---|
+//! | `noise2d` | `amplitude` (1), `pivot` (0), `texcoord` (UV0) | `perlin(t) · amplitude + pivot` | exact Gaussian convolution of Perlin's corner kernels for per-axis σ ≤ 0.25 lattice units, Gaussian damping of the rest beyond, octave dropped (exactly its mean, 0) once damped below 1e-3 |
+//! | `fractal2d` | `amplitude` (1), `octaves` (3), `lacunarity` (2), `diminish` (0.5), `texcoord` (UV0) | `Σ diminishⁱ perlin(t · lacunarityⁱ) · amplitude` | each octave as `noise2d`; octaves beyond the footprint's band limit are never evaluated |
+//! | `cellnoise2d` | `texcoord` (UV0) | hash of `floor(t)` in [0, 1] | exact: cell values weighted by the footprint's mass over each cell (σ ≤ 0.5 cells); beyond, the residual around the mean 0.5 shrinks like white noise (`√(σ₀/σ)` per axis) |
+//! | `worleynoise2d` | `texcoord` (UV0), `jitter` (1), `style` (0) | distance to the nearest 1–3 jittered feature points (style 0) or the nearest point's cell value (style 1) | 3×3 (σ < 0.2 cells) or 5×5 Gauss–Hermite over the footprint up to σ = 1 cell, blended into the pattern's global mean by σ = 2, then the mean alone |
+//!
+//! Perlin noise is `0.6616 Σ_c (g_c · (p − c)) W(pₓ − cₓ) W(p_y − c_y)` over lattice corners
+//! `c` with `W(d) = 1 − fade(|d|)`: each corner's kernel is separable, so for a footprint with
+//! per-axis spreads `σₓ, σ_y` (the marginals: correlation is ignored) its Gaussian average is a
+//! sum of products of 1D expectations of piecewise polynomials ([`gaussian::poly_expectation`]).
+//! Vector outputs use MaterialX's per-channel hash bytes; `vector4`'s fourth channel is float
+//! noise at `t + (19, 73)` (`fractal2d`: `t + (19, 193)`), `fractal2d` `vector2` is two float
+//! fractals at `t` and `t + (19, 193)`.
+
+use super::hash::{self, cell_float, cell_vec3, ifloor};
+use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
+use crate::gaussian::{self, poly, poly_deriv, poly_mul, Poly};
+use crate::graph::Source;
+use crate::moments::mul;
+use crate::value::{Filtered, Moments, ValueType};
+use glam::{DVec2, Vec2};
+use std::sync::OnceLock;
+
+pub(crate) const CATEGORIES: &[&str] = &["noise2d", "fractal2d", "cellnoise2d", "worleynoise2d"];
+
+/// Global statistics of a pattern (mean and variance of each output channel over the plane).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PatternStats {
+    /// Per-channel mean.
+    pub mean: [f32; 3],
+    /// Per-channel variance.
+    pub var: [f32; 3],
+}
+
+/// Noise operations.
+#[derive(Debug)]
+pub enum NoiseOp {
+    /// `noise2d`
+    Noise2d,
+    /// `fractal2d`
+    Fractal2d,
+    /// `cellnoise2d`
+    Cellnoise2d,
+    /// `worleynoise2d`, with its statistics for its (uniform) jitter.
+    Worley2d(PatternStats),
+}
+
+pub(crate) fn definition(category: &str) -> Option<NodeDef> {
+    use Def::*;
+    use InType::*;
+    let (inputs, types): (&'static [_], fn(ValueType) -> bool) = match category {
+        "noise2d" => (
+            &[inp!("amplitude", OutOrFloat, One), inp!("pivot", Float, Zero), inp!("texcoord", V2, Uv)],
+            types::float_or_vector,
+        ),
+        "fractal2d" => (
+            &[
+                inp!("amplitude", OutOrFloat, One),
+                inp!("octaves", Int, Splat(3.0)),
+                inp!("lacunarity", OutOrFloat, Splat(2.0)),
+                inp!("diminish", OutOrFloat, Half),
+                inp!("texcoord", V2, Uv),
+            ],
+            types::float_or_vector,
+        ),
+        "cellnoise2d" => (&[inp!("texcoord", V2, Uv)], |t| matches!(t, ValueType::Float | ValueType::Vector3)),
+        "worleynoise2d" => (&[inp!("texcoord", V2, Uv), inp!("jitter", Float, One), inp!("style", Int, Zero)], |t| {
+            matches!(t, ValueType::Float | ValueType::Vector2 | ValueType::Vector3)
+        }),
+        _ => return None,
+    };
+    let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
+    Some(NodeDef { category, inputs, params: &[], types, build })
+}
+
+fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], _: &[Param]) -> Result<Op, String> {
+    Ok(Op::Noise(match category {
+        "noise2d" => NoiseOp::Noise2d,
+        "fractal2d" => NoiseOp::Fractal2d,
+        "cellnoise2d" => NoiseOp::Cellnoise2d,
+        _ => {
+            let jitter = match &srcs[1] {
+                Source::Constant(v) => v.v[0],
+                _ => 1.0,
+            };
+            NoiseOp::Worley2d(worley_stats(jitter, ty.channels()))
+        }
+    }))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Unfiltered MaterialX Perlin noise (f32, as GLSL computes it).
+
+#[inline]
+fn fade(t: f32) -> f32 {
+    t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
+}
+
+#[inline]
+fn gradient(h: u32, x: f32, y: f32) -> f32 {
+    let h = h & 7;
+    let u = if h < 4 { x } else { y };
+    let v = 2.0 * if h < 4 { y } else { x };
+    (if h & 1 != 0 { -u } else { u }) + (if h & 2 != 0 { -v } else { v })
+}
+
+/// The gradient vector `g` with `gradient(h, x, y) = g · (x, y)`.
+#[inline]
+fn gradient_vector(h: u32) -> DVec2 {
+    let h = h & 7;
+    let s1 = if h & 1 != 0 { -1.0 } else { 1.0 };
+    let s2 = if h & 2 != 0 { -2.0 } else { 2.0 };
+    if h < 4 {
+        DVec2::new(s1, s2)
+    } else {
+        DVec2::new(s2, s1)
+    }
+}
+
+/// Which bits of a corner hash choose the gradient: the whole hash (float noise) or one byte
+/// (channel `k` of vector noise).
+#[derive(Clone, Copy, Debug)]
+enum HashSel {
+    Full,
+    Byte(u32),
+}
+
+impl HashSel {
+    #[inline]
+    fn pick(self, h: u32) -> u32 {
+        match self {
+            HashSel::Full => h,
+            HashSel::Byte(k) => (h >> (8 * k)) & 0xff,
+        }
+    }
+}
+
+const GRADIENT_SCALE_2D: f32 = 0.6616;
+
+/// MaterialX `mx_perlin_noise_float(vec2)` / channel of `mx_perlin_noise_vec3(vec2)`.
+fn perlin_point(p: Vec2, sel: HashSel) -> f32 {
+    let (x0, y0) = (ifloor(p.x), ifloor(p.y));
+    let (fx, fy) = (p.x - x0 as f32, p.y - y0 as f32);
+    let (u, v) = (fade(fx), fade(fy));
+    let h = |dx: i32, dy: i32| sel.pick(hash::hash2(x0.wrapping_add(dx), y0.wrapping_add(dy)));
+    let v0 = gradient(h(0, 0), fx, fy);
+    let v1 = gradient(h(1, 0), fx - 1.0, fy);
+    let v2 = gradient(h(0, 1), fx, fy - 1.0);
+    let v3 = gradient(h(1, 1), fx - 1.0, fy - 1.0);
+    let s1 = 1.0 - u;
+    GRADIENT_SCALE_2D * ((1.0 - v) * (v0 * s1 + v1 * u) + v * (v2 * s1 + v3 * u))
+}
+
+/// The gradient of unfiltered Perlin noise at `p` (f64, from the corner kernels).
+fn perlin_gradient(p: DVec2, sel: HashSel) -> DVec2 {
+    let (x0, y0) = (p.x.floor(), p.y.floor());
+    let w = |d: f64| {
+        let t = d.abs();
+        let f = t * t * t * (t * (t * 6.0 - 15.0) + 10.0);
+        let df = 30.0 * t * t * (t - 1.0) * (t - 1.0);
+        (1.0 - f, -df * d.signum())
+    };
+    let mut g = DVec2::ZERO;
+    for (cx, cy) in [(x0, y0), (x0 + 1.0, y0), (x0, y0 + 1.0), (x0 + 1.0, y0 + 1.0)] {
+        let gv = gradient_vector(sel.pick(hash::hash2(cx as i32, cy as i32)));
+        let d = p - DVec2::new(cx, cy);
+        let (wx, dwx) = w(d.x);
+        let (wy, dwy) = w(d.y);
+        let dot = gv.dot(d);
+        g.x += (gv.x * wx + dot * dwx) * wy;
+        g.y += (gv.y * wy + dot * dwy) * wx;
+    }
+    g * GRADIENT_SCALE_2D as f64
+}
+
+// ---------------------------------------------------------------------------------------------
+// Filtered Perlin noise.
+
+/// Per-axis spread up to which the corner sum is evaluated exactly (lattice units).
+pub const PERLIN_SIGMA_EXACT: f64 = 0.25;
+/// Gaussian damping rate of the residual beyond [`PERLIN_SIGMA_EXACT`]: the filtered value
+/// at spread σ is the exact one at σₑ times `exp(−κ (σ² − σₑ²))` per axis (fitted to the
+/// decay of the exact filtered noise's RMS between σ = 0.25 and 0.5).
+pub const PERLIN_KAPPA: f64 = 2.0;
+/// Damping below which an octave counts as fully filtered (value = its mean 0).
+pub const OCTAVE_CUTOFF: f64 = 1e-3;
+/// Per-axis spread (lattice units) below which an octave is evaluated at the footprint centre:
+/// the Gaussian average differs from the centre value by `½ tr(H Σ)`, under 1e-4 here.
+pub const PERLIN_SIGMA_POINT: f64 = 0.003;
+/// Variance of MaterialX's 2D Perlin noise over the plane (measured).
+pub const PERLIN_VARIANCE: f64 = 0.1055;
+
+struct Kernel {
+    /// W on [-1, 0), [0, 1); d·W on the same; and their derivatives.
+    w: [Poly; 2],
+    dw: [Poly; 2],
+    w1: [Poly; 2],
+    dw1: [Poly; 2],
+}
+
+fn kernel() -> &'static Kernel {
+    static K: OnceLock<Kernel> = OnceLock::new();
+    K.get_or_init(|| {
+        let wn = poly(&[1.0, 0.0, 0.0, 10.0, 15.0, 6.0]);
+        let wp = poly(&[1.0, 0.0, 0.0, -10.0, 15.0, -6.0]);
+        let d = poly(&[0.0, 1.0]);
+        let (dwn, dwp) = (poly_mul(&d, &wn), poly_mul(&d, &wp));
+        Kernel {
+            w: [wn, wp],
+            dw: [dwn, dwp],
+            w1: [poly_deriv(&wn), poly_deriv(&wp)],
+            dw1: [poly_deriv(&dwn), poly_deriv(&dwp)],
+        }
+    })
+}
+
+/// 1D expectations for lattice coordinate `c`: E[W], E[dW], dE[W]/dm, dE[dW]/dm.
+#[derive(Clone, Copy, Default)]
+struct AxisTerms {
+    w: f64,
+    dw: f64,
+    w1: f64,
+    dw1: f64,
+}
+
+/// The terms of every lattice coordinate `c` in `lo..=hi`, sharing the tail moments at the
+/// integer piece boundaries between coordinates.
+fn axis_terms(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); MAX_AXIS]) -> usize {
+    let k = kernel();
+    let mut tails = [gaussian::TailMoments::at(0.0); MAX_AXIS + 2];
+    let nb = ((hi - lo + 3) as usize).min(MAX_AXIS + 2);
+    for (j, t) in tails.iter_mut().enumerate().take(nb) {
+        *t = gaussian::TailMoments::at(((lo - 1 + j as i32) as f64 - m) / s);
+    }
+    let mut n = 0;
+    for c in lo..=hi {
+        let j = (c - lo) as usize;
+        if n >= MAX_AXIS || j + 2 >= nb {
+            break;
+        }
+        let neg = gaussian::TailMoments::between(&tails[j], &tails[j + 1]);
+        let pos = gaussian::TailMoments::between(&tails[j + 1], &tails[j + 2]);
+        let mu = m - c as f64;
+        let e = |p: &[Poly; 2]| {
+            gaussian::poly_expectation_with(&p[0], mu, s, &neg) + gaussian::poly_expectation_with(&p[1], mu, s, &pos)
+        };
+        out[n] = (c, AxisTerms { w: e(&k.w), dw: e(&k.dw), w1: e(&k.w1), dw1: e(&k.dw1) });
+        n += 1;
+    }
+    n
+}
+
+const MAX_AXIS: usize = 8;
+
+/// Filtered Perlin noise for up to 3 hash selections at once: per channel (value, ∂/∂x, ∂/∂y).
+/// `s` are the per-axis spreads, each ≤ [`PERLIN_SIGMA_EXACT`].
+fn perlin_exact(p: DVec2, s: DVec2, sels: &[HashSel], out: &mut [(f64, f64, f64); 4], work: &mut crate::eval::Work) {
+    let mut xs = [(0i32, AxisTerms::default()); MAX_AXIS];
+    let mut ys = [(0i32, AxisTerms::default()); MAX_AXIS];
+    let fill = |m: f64, s: f64, buf: &mut [(i32, AxisTerms); MAX_AXIS]| -> usize {
+        let lo = (m - 1.0 - 4.0 * s).floor() as i32 + 1;
+        let hi = (m + 1.0 + 4.0 * s).ceil() as i32 - 1;
+        axis_terms(m, s, lo, hi, buf)
+    };
+    let nx = fill(p.x, s.x, &mut xs);
+    let ny = fill(p.y, s.y, &mut ys);
+    for o in out.iter_mut() {
+        *o = (0.0, 0.0, 0.0);
+    }
+    for &(cy, ty) in &ys[..ny] {
+        for &(cx, tx) in &xs[..nx] {
+            let h = hash::hash2(cx, cy);
+            for (k, sel) in sels.iter().enumerate() {
+                let g = gradient_vector(sel.pick(h));
+                let o = &mut out[k];
+                o.0 += g.x * tx.dw * ty.w + g.y * tx.w * ty.dw;
+                o.1 += g.x * tx.dw1 * ty.w + g.y * tx.w1 * ty.dw;
+                o.2 += g.x * tx.dw * ty.w1 + g.y * tx.w * ty.dw1;
+            }
+        }
+    }
+    work.lattice += (nx * ny) as u64;
+    let k = GRADIENT_SCALE_2D as f64;
+    for o in out.iter_mut() {
+        *o = (o.0 * k, o.1 * k, o.2 * k);
+    }
+}
+
+/// One filtered Perlin octave for several channels. Returns `false` (and zeros) when the
+/// footprint filters the octave out completely.
+fn perlin_octave(
+    p: DVec2,
+    s: DVec2,
+    sels: &[HashSel],
+    offsets: &[DVec2],
+    out: &mut [Moments; 4],
+    ctx: &mut Ctx,
+) -> bool {
+    ctx.work.octaves += 1;
+    if s.x.max(s.y) < PERLIN_SIGMA_POINT {
+        for (k, sel) in sels.iter().enumerate() {
+            let q = p + offsets[k];
+            let mut m = Moments::constant(perlin_point(q.as_vec2(), *sel));
+            if !ctx.point {
+                let g = perlin_gradient(q, *sel);
+                m.grad = g.as_vec2();
+                m.var = (g.x * g.x * s.x * s.x + g.y * g.y * s.y * s.y) as f32;
+            }
+            out[k] = m;
+        }
+        ctx.work.lattice += 4;
+        return true;
+    }
+    let damp = |s: f64| {
+        if s > PERLIN_SIGMA_EXACT {
+            (-PERLIN_KAPPA * (s * s - PERLIN_SIGMA_EXACT * PERLIN_SIGMA_EXACT)).exp()
+        } else {
+            1.0
+        }
+    };
+    let att = damp(s.x) * damp(s.y);
+    if att < OCTAVE_CUTOFF {
+        for o in out.iter_mut() {
+            *o = Moments { mean: 0.0, grad: Vec2::ZERO, var: PERLIN_VARIANCE as f32 };
+        }
+        return false;
+    }
+    let se = s.min(DVec2::splat(PERLIN_SIGMA_EXACT));
+    let mut r = [(0.0, 0.0, 0.0); 4];
+    // Channels with equal offsets share one corner sum.
+    let same_offset = offsets.iter().all(|o| *o == offsets[0]);
+    if same_offset {
+        perlin_exact(p + offsets[0], se, sels, &mut r, ctx.work);
+    } else {
+        for (k, sel) in sels.iter().enumerate() {
+            let mut one = [(0.0, 0.0, 0.0); 4];
+            perlin_exact(p + offsets[k], se, std::slice::from_ref(sel), &mut one, ctx.work);
+            r[k] = one[0];
+        }
+    }
+    let v_glob = PERLIN_VARIANCE * (1.0 - (-PERLIN_KAPPA * (s.x * s.x + s.y * s.y)).exp());
+    for k in 0..sels.len() {
+        let (v, dx, dy) = (r[k].0 * att, r[k].1 * att, r[k].2 * att);
+        let v_lin = dx * dx * s.x * s.x + dy * dy * s.y * s.y;
+        out[k] = Moments { mean: v as f32, grad: Vec2::new(dx as f32, dy as f32), var: v_lin.max(v_glob) as f32 };
+    }
+    true
+}
+
+/// Hash selections and coordinate offsets per output channel.
+fn channel_layout(ty: ValueType, fractal: bool) -> ([HashSel; 4], [DVec2; 4], usize) {
+    let off = if fractal { DVec2::new(19.0, 193.0) } else { DVec2::new(19.0, 73.0) };
+    let z = DVec2::ZERO;
+    let b = |k| HashSel::Byte(k);
+    match ty.channels() {
+        1 => ([HashSel::Full; 4], [z; 4], 1),
+        2 if fractal => ([HashSel::Full, HashSel::Full, HashSel::Full, HashSel::Full], [z, off, z, z], 2),
+        2 => ([b(0), b(1), b(2), b(2)], [z; 4], 2),
+        3 => ([b(0), b(1), b(2), b(2)], [z; 4], 3),
+        _ => ([b(0), b(1), b(2), HashSel::Full], [z, z, z, off], 4),
+    }
+}
+
+/// The input coordinate: mean, per-axis spread, and the Jacobian rows (d coordinate / d uv).
+fn coordinate(t: &Filtered) -> (DVec2, DVec2, [Vec2; 2]) {
+    let p = DVec2::new(t.ch[0].mean as f64, t.ch[1].mean as f64);
+    let s = DVec2::new(t.ch[0].sigma() as f64, t.ch[1].sigma() as f64);
+    (p, s, [t.ch[0].grad, t.ch[1].grad])
+}
+
+/// Maps a noise-space gradient to a uv gradient.
+#[inline]
+fn to_uv(m: &Moments, j: &[Vec2; 2]) -> Moments {
+    Moments { mean: m.mean, grad: j[0] * m.grad.x + j[1] * m.grad.y, var: m.var }
+}
+
+fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let (amp, pivot, t) = (&ins[0], ins[1].ch[0], &ins[2]);
+    let (p, s, j) = coordinate(t);
+    let (sels, offs, n) = channel_layout(ty, false);
+    let mut oct = [Moments::default(); 4];
+    perlin_octave(p, s, &sels[..n], &offs[..n], &mut oct, ctx);
+    let mut out = Filtered::zero(ty);
+    for k in 0..n {
+        let v = mul(to_uv(&oct[k], &j), amp.at(k), ctx.fp);
+        out.ch[k] = Moments { mean: v.mean + pivot.mean, grad: v.grad + pivot.grad, var: v.var + pivot.var };
+    }
+    out
+}
+
+fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let amp = &ins[0];
+    let octaves = ins[1].ch[0].mean.round().max(0.0) as i32;
+    let lac = ins[2].ch[0].mean as f64;
+    let dim = ins[3].ch[0].mean as f64;
+    let (p0, s0, j) = coordinate(&ins[4]);
+    let (sels, offs, n) = channel_layout(ty, true);
+    let mut acc = [(0.0f64, DVec2::ZERO, 0.0f64); 4];
+    let (mut a, mut f) = (1.0f64, 1.0f64);
+    let mut oct = [Moments::default(); 4];
+    for _ in 0..octaves {
+        // MaterialX offsets the coordinate before the octave loop: (t + offset) · lacunarityⁱ.
+        let offs_i: [DVec2; 4] = offs.map(|o| o * f);
+        let alive = perlin_octave(p0 * f, s0 * f.abs(), &sels[..n], &offs_i[..n], &mut oct, ctx);
+        for k in 0..n {
+            let o = &oct[k];
+            acc[k].0 += a * o.mean as f64;
+            acc[k].1 += DVec2::new(o.grad.x as f64, o.grad.y as f64) * (a * f);
+            acc[k].2 += a * a * o.var as f64;
+        }
+        if !alive {
+            // Every further octave is finer still: each contributes its mean (0) and its full
+            // variance, without being evaluated.
+            let mut rest = 0.0;
+            let mut ai = a * dim;
+            for _ in 0..64 {
+                rest += ai * ai;
+                ai *= dim;
+                if ai.abs() < 1e-4 {
+                    break;
+                }
+            }
+            for a in acc.iter_mut().take(n) {
+                a.2 += rest * PERLIN_VARIANCE;
+            }
+            break;
+        }
+        a *= dim;
+        f *= lac;
+    }
+    let mut out = Filtered::zero(ty);
+    for k in 0..n {
+        let m = Moments { mean: acc[k].0 as f32, grad: acc[k].1.as_vec2(), var: acc[k].2 as f32 };
+        out.ch[k] = mul(to_uv(&m, &j), amp.at(k), ctx.fp);
+    }
+    out
+}
+
+/// Unfiltered fractal noise (for tests and the point path).
+pub fn fractal_point(p: Vec2, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
+    let (mut r, mut a, mut q) = (0.0, 1.0, p);
+    for _ in 0..octaves {
+        r += a * perlin_point(q, HashSel::Full);
+        a *= diminish;
+        q *= lacunarity;
+    }
+    r
+}
+
+/// Unfiltered float Perlin noise at `p` (MaterialX `mx_perlin_noise_float(vec2)`).
+pub fn perlin_float(p: Vec2) -> f32 {
+    perlin_point(p, HashSel::Full)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Cell noise.
+
+/// Per-axis spread (cells) up to which cell noise is filtered exactly.
+pub const CELL_SIGMA_EXACT: f64 = 0.5;
+
+fn cell_value(ix: i32, iy: i32, k: usize, vector: bool) -> f32 {
+    if vector {
+        cell_vec3(ix, iy, k as i32)
+    } else {
+        cell_float(ix, iy)
+    }
+}
+
+fn cellnoise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let (p, s, j) = coordinate(&ins[0]);
+    let vector = ty == ValueType::Vector3;
+    let n = ty.channels();
+    let mut out = Filtered::zero(ty);
+    if s.x == 0.0 && s.y == 0.0 {
+        let (ix, iy) = (ifloor(p.x as f32), ifloor(p.y as f32));
+        for k in 0..n {
+            out.ch[k] = Moments::constant(cell_value(ix, iy, k, vector));
+        }
+        ctx.work.lattice += 1;
+        return out;
+    }
+    let shrink =
+        (CELL_SIGMA_EXACT / s.x.max(CELL_SIGMA_EXACT)).sqrt() * (CELL_SIGMA_EXACT / s.y.max(CELL_SIGMA_EXACT)).sqrt();
+    if shrink < 0.02 {
+        for k in 0..n {
+            out.ch[k] = Moments { mean: 0.5, grad: Vec2::ZERO, var: 1.0 / 12.0 };
+        }
+        return out;
+    }
+    let se = s.min(DVec2::splat(CELL_SIGMA_EXACT));
+    // Per-axis cell masses and their derivatives with respect to the mean.
+    let axis = |m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]| -> usize {
+        let lo = (m - 4.0 * s).floor() as i32;
+        let hi = (m + 4.0 * s).floor() as i32;
+        let mut n = 0;
+        for c in lo..=hi.min(lo + 7) {
+            let (a, b) = ((c as f64 - m) / s, (c as f64 + 1.0 - m) / s);
+            buf[n] = (c, gaussian::mass(a, b), (gaussian::pdf(a) - gaussian::pdf(b)) / s);
+            n += 1;
+        }
+        n
+    };
+    let mut xs = [(0, 0.0, 0.0); 8];
+    let mut ys = [(0, 0.0, 0.0); 8];
+    let nx = axis(p.x, se.x, &mut xs);
+    let ny = axis(p.y, se.y, &mut ys);
+    ctx.work.lattice += (nx * ny) as u64;
+    for k in 0..n {
+        let (mut e, mut e2, mut dx, mut dy) = (0.0, 0.0, 0.0, 0.0);
+        for &(cy, wy, dwy) in &ys[..ny] {
+            for &(cx, wx, dwx) in &xs[..nx] {
+                let h = cell_value(cx, cy, k, vector) as f64;
+                e += wx * wy * h;
+                e2 += wx * wy * h * h;
+                dx += dwx * wy * h;
+                dy += wx * dwy * h;
+            }
+        }
+        let var = if shrink < 1.0 { 1.0 / 12.0 - ((e - 0.5) * shrink).powi(2) } else { e2 - e * e };
+        let m = Moments {
+            mean: (0.5 + (e - 0.5) * shrink) as f32,
+            grad: Vec2::new((dx * shrink) as f32, (dy * shrink) as f32),
+            var: var.max(0.0) as f32,
+        };
+        out.ch[k] = to_uv(&m, &j);
+    }
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+// Worley noise.
+
+/// Unfiltered MaterialX `mx_worley_noise_*(vec2)` (Euclidean metric): the `n` nearest
+/// distances (style 0) or the nearest feature's cell value(s) (style 1).
+pub fn worley_point(p: Vec2, jitter: f32, style: i32, n: usize) -> [f32; 3] {
+    let (x0, y0) = (ifloor(p.x), ifloor(p.y));
+    let local = Vec2::new(p.x - x0 as f32, p.y - y0 as f32);
+    let mut d = [1e6f32; 3];
+    let mut minpos = Vec2::ZERO;
+    for x in -1..=1 {
+        for y in -1..=1 {
+            let (cx, cy) = (x0.wrapping_add(x), y0.wrapping_add(y));
+            let off = Vec2::new(cell_vec3(cx, cy, 0), cell_vec3(cx, cy, 1));
+            let off = (off - 0.5) * jitter + 0.5;
+            let cell = Vec2::new(x as f32, y as f32) + off - local;
+            let dist = cell.dot(cell);
+            if dist < d[0] {
+                d[2] = d[1];
+                d[1] = d[0];
+                d[0] = dist;
+                minpos = cell;
+            } else if dist < d[1] {
+                d[2] = d[1];
+                d[1] = dist;
+            } else if dist < d[2] {
+                d[2] = dist;
+            }
+        }
+    }
+    if style == 1 {
+        let q = minpos + p;
+        let (ix, iy) = (ifloor(q.x), ifloor(q.y));
+        if n == 1 {
+            [cell_float(ix, iy), 0.0, 0.0]
+        } else {
+            [cell_vec3(ix, iy, 0), cell_vec3(ix, iy, 1), cell_vec3(ix, iy, 2)]
+        }
+    } else {
+        [d[0].sqrt(), d[1].sqrt(), d[2].sqrt()]
+    }
+}
+
+fn worley_stats(jitter: f32, n: usize) -> PatternStats {
+    let (mut s, mut s2) = ([0.0f64; 3], [0.0f64; 3]);
+    let res = 40;
+    let count = (res * res) as f64;
+    for i in 0..res {
+        for j in 0..res {
+            let p = Vec2::new(3.0 + 6.0 * (i as f32 + 0.5) / res as f32, -7.0 + 6.0 * (j as f32 + 0.5) / res as f32);
+            let v = worley_point(p, jitter, 0, n);
+            for k in 0..3 {
+                s[k] += v[k] as f64;
+                s2[k] += (v[k] as f64).powi(2);
+            }
+        }
+    }
+    let mut st = PatternStats::default();
+    for k in 0..3 {
+        st.mean[k] = (s[k] / count) as f32;
+        st.var[k] = (s2[k] / count - (s[k] / count).powi(2)).max(0.0) as f32;
+    }
+    st
+}
+
+fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let (p, s, j) = coordinate(&ins[0]);
+    let jitter = ins[1].ch[0].mean;
+    let style = ins[2].ch[0].mean.round() as i32;
+    let n = ty.channels();
+    let mut out = Filtered::zero(ty);
+    let (gmean, gvar) = if style == 1 { ([0.5; 3], [1.0 / 12.0; 3]) } else { (stats.mean, stats.var) };
+    let smax = s.x.max(s.y);
+    if smax == 0.0 {
+        let v = worley_point(p.as_vec2(), jitter, style, n);
+        for k in 0..n {
+            out.ch[k] = Moments::constant(v[k]);
+        }
+        ctx.work.lattice += 9;
+        return out;
+    }
+    let w_global = ((smax - 1.0) / 1.0).clamp(0.0, 1.0);
+    if w_global >= 1.0 {
+        for k in 0..n {
+            out.ch[k] = Moments { mean: gmean[k], grad: Vec2::ZERO, var: gvar[k] };
+        }
+        return out;
+    }
+    let (mut e, mut e2, mut ex, mut ey) = ([0.0f64; 3], [0.0f64; 3], [0.0f64; 3], [0.0f64; 3]);
+    // 3×3 nodes suffice while the footprint is small against a cell; 5×5 beyond.
+    let rule: &[(f64, f64)] = if smax < 0.2 { &gaussian::HERMITE3 } else { &gaussian::HERMITE5 };
+    for &(zy, wy) in rule {
+        for &(zx, wx) in rule {
+            let q = p + DVec2::new(zx * s.x, zy * s.y);
+            let v = worley_point(q.as_vec2(), jitter, style, n);
+            for k in 0..n {
+                let w = wx * wy;
+                let vk = v[k] as f64;
+                e[k] += w * vk;
+                e2[k] += w * vk * vk;
+                ex[k] += w * zx * vk;
+                ey[k] += w * zy * vk;
+            }
+        }
+    }
+    ctx.work.lattice += 9 * (rule.len() * rule.len()) as u64;
+    for k in 0..n {
+        let var = (e2[k] - e[k] * e[k]).max(0.0);
+        let gx = if s.x > 0.0 { ex[k] / s.x } else { 0.0 };
+        let gy = if s.y > 0.0 { ey[k] / s.y } else { 0.0 };
+        let wl = 1.0 - w_global;
+        let m = Moments {
+            mean: (wl * e[k] + w_global * gmean[k] as f64) as f32,
+            grad: Vec2::new((wl * gx) as f32, (wl * gy) as f32),
+            var: (wl * var + w_global * gvar[k] as f64) as f32,
+        };
+        out.ch[k] = to_uv(&m, &j);
+    }
+    out
+}
+
+pub(crate) fn eval(op: &NoiseOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let mut out = match op {
+        NoiseOp::Noise2d => noise2d(ty, ins, ctx),
+        NoiseOp::Fractal2d => fractal2d(ty, ins, ctx),
+        NoiseOp::Cellnoise2d => cellnoise2d(ty, ins, ctx),
+        NoiseOp::Worley2d(st) => worley2d(st, ty, ins, ctx),
+    };
+    if ctx.point {
+        for c in out.ch.iter_mut() {
+            c.grad = Vec2::ZERO;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Prints the global variance of Perlin noise and the decay of the exactly filtered noise's
+    /// RMS with σ, from which `PERLIN_VARIANCE` and `PERLIN_KAPPA` were set.
+    #[test]
+    fn perlin_constants() {
+        let (mut s, mut s2, mut n) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..400 {
+            for j in 0..400 {
+                let v = perlin_float(Vec2::new(0.013 + i as f32 * 0.0517, 0.029 + j as f32 * 0.0491)) as f64;
+                s += v;
+                s2 += v * v;
+                n += 1.0;
+            }
+        }
+        let var = s2 / n - (s / n).powi(2);
+        println!("perlin variance {var:.4}");
+        assert!((var - PERLIN_VARIANCE).abs() < 0.005, "variance {var}");
+        let mut work = crate::eval::Work::default();
+        let mut rms = Vec::new();
+        for &sig in &[0.25, 0.35, 0.45, 0.55, 0.65] {
+            let mut acc = 0.0;
+            let mut cnt = 0.0;
+            for i in 0..60 {
+                for j in 0..60 {
+                    let p = DVec2::new(0.37 + i as f64 * 0.173, 0.11 + j as f64 * 0.191);
+                    let mut o = [(0.0, 0.0, 0.0); 4];
+                    perlin_exact(p, DVec2::splat(sig), &[HashSel::Full], &mut o, &mut work);
+                    acc += o[0].0 * o[0].0;
+                    cnt += 1.0;
+                }
+            }
+            rms.push((sig, (acc / cnt).sqrt()));
+        }
+        for &(sig, r) in &rms {
+            let kappa = -(r / rms[0].1).ln() / (2.0 * (sig * sig - 0.0625));
+            println!("sigma {sig}: rms {r:.5}, per-axis kappa {kappa:.2}");
+        }
+    }
+}
