@@ -55,6 +55,8 @@
 //! infinity for finite inputs, and non-finite inputs lead to the largest footprint.
 
 #![deny(missing_docs)]
+// `!(x > 0.0)` is how this crate says "not positive, or NaN": the negation is the point.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 mod camera;
 mod constraint;

@@ -191,15 +191,18 @@ fn intersect_sphere(center: Vec3, radius: f32, o: Vec3, d: Vec3, tmin: f32, tmax
     // Double precision keeps grazing and distant hits stable.
     let oc = (o - center).as_dvec3();
     let d = d.as_dvec3();
+    // `d` is unit only to f32 precision: keep a = d·d, or the discriminant's error grows with
+    // the squared distance to the sphere.
+    let a = d.length_squared();
     let b = oc.dot(d);
     let c = oc.length_squared() - (radius as f64) * (radius as f64);
-    let disc = b * b - c;
+    let disc = b * b - a * c;
     if disc < 0.0 {
         return None;
     }
     let sq = disc.sqrt();
-    let t0 = (-b - sq) as f32;
-    let t1 = (-b + sq) as f32;
+    let t0 = ((-b - sq) / a) as f32;
+    let t1 = ((-b + sq) / a) as f32;
     if t0 > tmin && t0 < tmax {
         Some(t0)
     } else if t1 > tmin && t1 < tmax {

@@ -12,8 +12,10 @@ use crate::math::{max_component, Spectrum};
 use crate::pathfootprint::{vertex_of, FootprintMode, PathFootprint};
 use crate::sampling::Rng;
 use crate::scene::Scene;
+use crate::shading::ShadeScratch;
+use crate::texture::ShadeContext;
 use footprint::Vertex;
-use glam::{DMat2, Vec2, Vec3};
+use glam::{DMat2, Mat2, Vec2, Vec3};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -59,6 +61,8 @@ pub struct RenderOutput {
     pub footprint_aov: Option<Image>,
     /// Counters.
     pub counts: RenderCounts,
+    /// Per scene graph: node evaluations and work counters.
+    pub graph_stats: Vec<graph::EvalStats>,
     /// Wall-clock time of the rendering phase.
     pub time: Duration,
 }
@@ -138,27 +142,32 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<(Vec<(Spectrum, Spectrum)>, RenderCounts)> = tiles
+    let results: Vec<(Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counts = RenderCounts::default();
+            let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
             let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
             for y in y0..y1 {
                 for x in x0..x1 {
-                    px.push(render_pixel_aov(scene, settings, x, y, &mut counts));
+                    px.push(render_pixel_aov(scene, settings, x, y, &mut counts, &mut shade));
                 }
             }
             progress(px.len() as u64);
-            (px, counts)
+            let mut stats = Vec::new();
+            shade.merge_stats_into(&mut stats);
+            (px, counts, stats)
         })
         .collect();
     let mut image = Image::new(w, h);
     let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
     let mut counts = RenderCounts::default();
-    for (&(tx, ty), (px, c)) in tiles.iter().zip(&results) {
+    let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
+    for (&(tx, ty), (px, c, gs)) in tiles.iter().zip(&results) {
         counts.add(c);
+        merge_graph_stats(&mut graph_stats, gs);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
         for (i, p) in px.iter().enumerate() {
@@ -169,7 +178,24 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
             }
         }
     }
-    RenderOutput { image, footprint_aov: aov, counts, time: start.elapsed() }
+    RenderOutput { image, footprint_aov: aov, counts, graph_stats, time: start.elapsed() }
+}
+
+fn merge_graph_stats(into: &mut Vec<graph::EvalStats>, from: &[graph::EvalStats]) {
+    into.resize(from.len().max(into.len()), graph::EvalStats::default());
+    for (a, b) in into.iter_mut().zip(from) {
+        if a.evaluations.len() < b.evaluations.len() {
+            a.evaluations.resize(b.evaluations.len(), 0);
+            a.lookups.resize(b.lookups.len(), 0);
+        }
+        for (x, y) in a.evaluations.iter_mut().zip(&b.evaluations) {
+            *x += y;
+        }
+        for (x, y) in a.lookups.iter_mut().zip(&b.lookups) {
+            *x += y;
+        }
+        a.work.merge(&b.work);
+    }
 }
 
 /// Accumulates per-bounce LODs for the footprint AOV.
@@ -197,12 +223,13 @@ fn render_pixel_aov(
     x: u32,
     y: u32,
     counts: &mut RenderCounts,
+    shade: &mut ShadeScratch,
 ) -> (Spectrum, Spectrum) {
     let Some(density) = settings.footprint_aov_density else {
-        return (render_pixel(scene, settings, x, y, counts), Spectrum::ZERO);
+        return (render_pixel_with(scene, settings, x, y, counts, shade, &mut NoObserver), Spectrum::ZERO);
     };
     let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
-    let l = render_pixel_with(scene, settings, x, y, counts, &mut obs);
+    let l = render_pixel_with(scene, settings, x, y, counts, shade, &mut obs);
     let lods: [f32; AOV_BOUNCES] =
         std::array::from_fn(
             |k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX },
@@ -210,18 +237,14 @@ fn render_pixel_aov(
     (l, Spectrum::from_array(lods))
 }
 
-/// Mean radiance of one pixel over `settings.spp` samples.
-pub fn render_pixel(scene: &Scene, settings: RenderSettings, x: u32, y: u32, counts: &mut RenderCounts) -> Spectrum {
-    render_pixel_with(scene, settings, x, y, counts, &mut NoObserver)
-}
-
-/// [`render_pixel`], reporting every path to `obs`.
+/// Mean radiance of one pixel over `settings.spp` samples, reporting every path to `obs`.
 pub fn render_pixel_with<O: PathObserver>(
     scene: &Scene,
     settings: RenderSettings,
     x: u32,
     y: u32,
     counts: &mut RenderCounts,
+    shade: &mut ShadeScratch,
     obs: &mut O,
 ) -> Spectrum {
     let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
@@ -231,7 +254,7 @@ pub fn render_pixel_with<O: PathObserver>(
         let offset = scene.rfilter.sample(|| rng.next_f32());
         let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
         let cam = scene.camera.generate_ray(film);
-        let l = radiance(scene, settings, &cam, &mut rng, counts, obs);
+        let l = radiance(scene, settings, &cam, &mut rng, counts, shade, obs);
         counts.samples += 1;
         if l.is_finite() {
             sum += l;
@@ -277,6 +300,7 @@ pub fn radiance<O: PathObserver>(
     cam: &CameraRay,
     rng: &mut Rng,
     counts: &mut RenderCounts,
+    shade: &mut ShadeScratch,
     obs: &mut O,
 ) -> Spectrum {
     let settings = scene.integrator;
@@ -345,7 +369,18 @@ pub fn radiance<O: PathObserver>(
             obs.event(depth, if shape.emitter.is_some() { Event::Emit } else { Event::Absorb }, 0.0, 1.0);
             break;
         }
-        let bsdf = scene.materials[shape.material as usize].at(si.uv);
+        let material = &scene.materials[shape.material as usize];
+        let outputs: &[graph::Filtered] = if material.graphs.is_empty() {
+            &[]
+        } else {
+            // Procedural textures are filtered to the vertex's uv footprint (a point without one).
+            let cov = match &vertex {
+                Some(v) => footprint::uv_covariance(var, v).as_mat2(),
+                None => Mat2::ZERO,
+            };
+            shade.evaluate(&scene.graphs, material, &graph::Footprint::new(si.uv, cov))
+        };
+        let bsdf = material.bsdf.at(&ShadeContext { uv: si.uv, outputs });
         let wi = si.sh.to_local(-ray.d);
 
         // Next-event estimation.

@@ -6,6 +6,9 @@
 //! [`emitter::Emitter`]s and a [`camera::Camera`]. [`integrator::render`] turns it into a
 //! [`film::Image`].
 
+// `!(x > 0.0)` is how this crate says "not positive, or NaN": the negation is the point.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod bsdf;
 pub mod camera;
 pub mod emitter;
@@ -19,5 +22,6 @@ pub mod mesh;
 pub mod pathfootprint;
 pub mod sampling;
 pub mod scene;
+pub mod shading;
 pub mod texture;
 pub mod xml;

@@ -11,6 +11,7 @@ use crate::error::Result;
 use crate::geometry::{mesh_area_distribution, Accel, Shape, ShapeGeometry};
 use crate::mesh::TriangleMesh;
 use crate::scene::{PathSettings, Scene};
+use crate::shading::{Material, MaterialGraph, SceneGraph};
 use crate::texture::{Bitmap, Texture, WrapMode};
 use crate::xml::{self, Object};
 use glam::{Affine2, Affine3A, Mat3, Mat4, Vec2, Vec3};
@@ -41,7 +42,13 @@ pub fn load_str(text: &str, virtual_path: &Path, base_dir: &Path, defines: &[(St
 struct Builder {
     base: PathBuf,
     shapes: Vec<Shape>,
-    materials: Vec<BsdfDesc>,
+    materials: Vec<Material>,
+    /// Procedural graphs, one per MaterialX document, and the documents by resolved path.
+    graphs: Vec<SceneGraph>,
+    documents: HashMap<PathBuf, (u32, Arc<graph::Document>)>,
+    /// Graph outputs requested by the textures of the material being built: (graph, output,
+    /// scalar); a texture's slot is its index here.
+    pending_outputs: Vec<(u32, graph::OutputId)>,
     /// Materials already built, keyed by the address of their XML object (shared `<ref>`s).
     material_ids: HashMap<*const Object, u32>,
     emitters: Vec<Emitter>,
@@ -80,6 +87,9 @@ impl Builder {
             base,
             shapes: Vec::new(),
             materials: Vec::new(),
+            graphs: Vec::new(),
+            documents: HashMap::new(),
+            pending_outputs: Vec::new(),
             material_ids: HashMap::new(),
             emitters: Vec::new(),
             bitmaps: HashMap::new(),
@@ -128,12 +138,14 @@ impl Builder {
             eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
         }
         let accel = Accel::build(&self.shapes);
+        let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
         let infinite =
             self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();
         Ok(Scene {
             shapes: self.shapes,
             accel,
             materials: self.materials,
+            graphs: self.graphs,
             emitters: self.emitters,
             infinite,
             camera,
@@ -141,9 +153,8 @@ impl Builder {
             integrator,
             spp,
             seed,
-            // No texture of the Mitsuba subset filters by footprint (Mitsuba's bitmaps are not
-            // mip-mapped); procedural graphs will.
-            footprints_needed: false,
+            // Procedural graphs are filtered by footprint; Mitsuba's bitmaps are not mip-mapped.
+            footprints_needed,
         })
     }
 
@@ -298,7 +309,11 @@ impl Builder {
 
     /// A texture object (`bitmap`, `checkerboard`).
     fn texture(&mut self, obj: &Object) -> Result<Texture> {
-        let to_uv = obj.transform("to_uv")?.map(to_uv_affine).unwrap_or(Affine2::IDENTITY);
+        let to_uv = if obj.plugin == "mtlx" {
+            Affine2::IDENTITY
+        } else {
+            obj.transform("to_uv")?.map(to_uv_affine).unwrap_or(Affine2::IDENTITY)
+        };
         let tex = match obj.plugin.as_str() {
             "bitmap" => {
                 let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("bitmap needs a 'filename'"))?;
@@ -320,7 +335,29 @@ impl Builder {
                 color1: check_rgb(obj, "color1", obj.rgb("color1", Vec3::splat(0.2))?)?,
                 to_uv,
             },
-            other => return Err(obj.error(format!("unknown texture '{other}' (supported: bitmap, checkerboard)"))),
+            "mtlx" => {
+                let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("mtlx texture needs a 'filename'"))?;
+                let output = obj
+                    .opt_string("output")?
+                    .ok_or_else(|| obj.error("mtlx texture needs an 'output' (nodegraph/output, e.g. NG_wood/out)"))?;
+                if obj.has("to_uv") {
+                    return Err(
+                        obj.error_at("to_uv", "mtlx textures place uv inside the graph (place2d), not with to_uv")
+                    );
+                }
+                let (g, doc) = self.document(obj, &file)?;
+                let out = doc.graph().output_id(&output).ok_or_else(|| {
+                    let names: Vec<&str> = doc.graph().outputs().iter().map(|o| o.name.as_str()).collect();
+                    obj.error_at(
+                        "output",
+                        format!("'{output}' is not an output of {file} (outputs: {})", names.join(", ")),
+                    )
+                })?;
+                self.graph_texture(obj, g, out, false)?
+            }
+            other => {
+                return Err(obj.error(format!("unknown texture '{other}' (supported: bitmap, checkerboard, mtlx)")))
+            }
         };
         obj.check_unused()?;
         Ok(tex)
@@ -357,7 +394,7 @@ impl Builder {
     }
 
     /// Roughness parameters shared by `roughconductor` and `roughdielectric`.
-    fn microfacet(&mut self, obj: &Object) -> Result<(MicrofacetKind, f32, f32)> {
+    fn microfacet(&mut self, obj: &Object) -> Result<(MicrofacetKind, Texture, Texture)> {
         let kind = match obj.string("distribution", "beckmann")?.as_str() {
             "beckmann" => MicrofacetKind::Beckmann,
             "ggx" => MicrofacetKind::Ggx,
@@ -370,20 +407,24 @@ impl Builder {
             if obj.has("alpha") {
                 return Err(obj.error("give either alpha or alpha_u/alpha_v, not both"));
             }
-            (obj.float("alpha_u", 0.1)?, obj.float("alpha_v", 0.1)?)
+            (self.roughness_param(obj, "alpha_u")?, self.roughness_param(obj, "alpha_v")?)
         } else {
-            let a = obj.float("alpha", 0.1)?;
-            (a, a)
+            let a = self.roughness_param(obj, "alpha")?;
+            (a.clone(), a)
         };
-        for (name, a) in [("alpha", au), ("alpha_v", av)] {
-            if !(a.is_finite() && a > 0.0) {
-                return Err(obj.error_at(
-                    if obj.has(name) { name } else { "alpha_u" },
-                    format!("roughness alpha must be a finite positive number, got {a}"),
-                ));
-            }
+        Ok((kind, au, av))
+    }
+
+    /// A roughness: a positive finite float (default 0.1) or a float texture.
+    fn roughness_param(&mut self, obj: &Object, name: &str) -> Result<Texture> {
+        if obj.child_named(name).is_some() {
+            return self.texture_param(obj, name, Vec3::splat(0.1));
         }
-        Ok((kind, au.max(1e-4), av.max(1e-4)))
+        let a = obj.float(name, 0.1)?;
+        if !(a.is_finite() && a > 0.0) {
+            return Err(obj.error_at(name, format!("roughness {name} must be a finite positive number, got {a}")));
+        }
+        Ok(Texture::Constant(Vec3::splat(a)))
     }
 
     fn conductor_ior(&mut self, obj: &Object) -> Result<(Vec3, Vec3)> {
@@ -476,9 +517,11 @@ impl Builder {
         if let Some(&i) = self.material_ids.get(&key) {
             return Ok(i);
         }
+        self.pending_outputs.clear();
         let desc = self.bsdf(obj)?;
+        let material = self.finish_material(desc);
         let i = self.materials.len() as u32;
-        self.materials.push(desc);
+        self.materials.push(material);
         self.material_ids.insert(key, i);
         Ok(i)
     }
@@ -570,8 +613,78 @@ impl Builder {
 
     fn default_material(&mut self) -> u32 {
         let i = self.materials.len() as u32;
-        self.materials.push(BsdfDesc::default());
+        self.materials.push(Material::plain(BsdfDesc::default()));
         i
+    }
+
+    /// Groups the graph outputs the material's textures asked for into one plan per graph.
+    fn finish_material(&mut self, bsdf: BsdfDesc) -> Material {
+        let slot_count = self.pending_outputs.len() as u32;
+        let mut graphs: Vec<MaterialGraph> = Vec::new();
+        let mut order: Vec<u32> = Vec::new();
+        for &(g, _) in &self.pending_outputs {
+            if !order.contains(&g) {
+                order.push(g);
+            }
+        }
+        for g in order {
+            let (outputs, slots): (Vec<graph::OutputId>, Vec<u32>) = self
+                .pending_outputs
+                .iter()
+                .enumerate()
+                .filter(|(_, (pg, _))| *pg == g)
+                .map(|(slot, (_, out))| (*out, slot as u32))
+                .unzip();
+            let plan = self.graphs[g as usize].graph().plan(&outputs);
+            graphs.push(MaterialGraph { graph: g, plan, slots });
+        }
+        self.pending_outputs.clear();
+        Material { bsdf, graphs, slot_count }
+    }
+
+    /// Loads (once) the MaterialX document `file` named by `obj`; returns its graph index.
+    fn document(&mut self, obj: &Object, file: &str) -> Result<(u32, Arc<graph::Document>)> {
+        let path = self.resolve(file);
+        if let Some(d) = self.documents.get(&path) {
+            return Ok(d.clone());
+        }
+        if !path.is_file() {
+            return Err(obj.error_at("filename", format!("MaterialX document '{}' not found", path.display())));
+        }
+        let doc = graph::Document::load(&path)
+            .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
+        let doc = Arc::new(doc);
+        let index = self.graphs.len() as u32;
+        self.graphs.push(SceneGraph { name: path.display().to_string(), document: doc.clone() });
+        self.documents.insert(path, (index, doc.clone()));
+        Ok((index, doc))
+    }
+
+    /// A texture reading graph output `output` of graph `g`: allocates (or reuses) its slot.
+    fn graph_texture(&mut self, obj: &Object, g: u32, output: graph::OutputId, want_scalar: bool) -> Result<Texture> {
+        let ty = self.graphs[g as usize].graph().output(output).ty;
+        let scalar = match ty {
+            graph::ValueType::Float => true,
+            graph::ValueType::Color3
+            | graph::ValueType::Vector3
+            | graph::ValueType::Color4
+            | graph::ValueType::Vector4 => false,
+            other => {
+                return Err(obj.error(format!(
+                    "graph output of type {other} cannot drive a BSDF parameter (expected float or color3)"
+                )))
+            }
+        };
+        // A colour output in a float slot reads as its luminance (Mitsuba's eval_1).
+        let _ = want_scalar;
+        let slot = match self.pending_outputs.iter().position(|&(pg, po)| pg == g && po == output) {
+            Some(i) => i,
+            None => {
+                self.pending_outputs.push((g, output));
+                self.pending_outputs.len() - 1
+            }
+        };
+        Ok(Texture::GraphOutput { slot: slot as u32, scalar })
     }
 
     fn emitter(&mut self, obj: &Object) -> Result<Emitter> {

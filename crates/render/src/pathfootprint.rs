@@ -67,8 +67,10 @@ pub fn scatter_of(bs: &BsdfSample) -> Scatter {
     }
 }
 
-/// A footprint estimator's state along one camera path (no allocation).
+/// A footprint estimator's state along one camera path (no allocation; one lives on the stack
+/// per path, so the variants' different sizes cost nothing worth a box).
 #[derive(Clone, Copy, Debug)]
+#[allow(clippy::large_enum_variant)]
 pub enum PathFootprint {
     /// Algorithm 1.
     Covariance(FootprintTracker),

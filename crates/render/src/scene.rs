@@ -1,10 +1,10 @@
 //! A loaded scene: shapes and their BVH, materials, emitters, camera, film and integrator
 //! settings.
 
-use crate::bsdf::BsdfDesc;
 use crate::camera::{Camera, Rfilter};
 use crate::emitter::Emitter;
 use crate::geometry::{Accel, Shape};
+use crate::shading::{Material, SceneGraph};
 
 /// Settings of Mitsuba's `path` integrator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -22,7 +22,9 @@ pub struct Scene {
     /// BVH over the shapes.
     pub accel: Accel,
     /// Materials; shapes refer to them by index.
-    pub materials: Vec<BsdfDesc>,
+    pub materials: Vec<Material>,
+    /// Procedural graphs the materials read (one per MaterialX document).
+    pub graphs: Vec<SceneGraph>,
     /// Emitters; area emitters refer to their shape.
     pub emitters: Vec<Emitter>,
     /// Indices of emitters at infinity (constant, envmap).

@@ -132,6 +132,23 @@ impl Bitmap {
     }
 }
 
+/// What textures may read at a shading point: its uv and, for procedural graphs, the values of
+/// the material's graph outputs already evaluated for the point's footprint.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadeContext<'a> {
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// The material's graph outputs at this point (filtered to its footprint), by slot.
+    pub outputs: &'a [graph::Filtered],
+}
+
+impl ShadeContext<'static> {
+    /// A context with only uv (materials without graphs).
+    pub fn uv(uv: Vec2) -> Self {
+        ShadeContext { uv, outputs: &[] }
+    }
+}
+
 /// A texture bound to a BSDF parameter.
 #[derive(Clone, Debug)]
 pub enum Texture {
@@ -155,12 +172,21 @@ pub enum Texture {
         /// Behaviour outside [0, 1).
         wrap: WrapMode,
     },
+    /// An output of a procedural graph, evaluated per shading point before the BSDF (see
+    /// [`ShadeContext::outputs`]). Negative or NaN values read as 0.
+    GraphOutput {
+        /// Index into the material's evaluated outputs.
+        slot: u32,
+        /// A scalar output (float): broadcast to RGB.
+        scalar: bool,
+    },
 }
 
 impl Texture {
-    /// The value at `uv`.
+    /// The value at the shading point.
     #[inline]
-    pub fn eval(&self, uv: Vec2) -> Spectrum {
+    pub fn eval(&self, ctx: &ShadeContext) -> Spectrum {
+        let uv = ctx.uv;
         match self {
             Texture::Constant(c) => *c,
             Texture::Checkerboard { color0, color1, to_uv } => {
@@ -174,15 +200,26 @@ impl Texture {
                 }
             }
             Texture::Bitmap { image, to_uv, wrap } => image.bilinear(to_uv.transform_point2(uv), *wrap),
+            Texture::GraphOutput { slot, scalar } => {
+                let f = &ctx.outputs[*slot as usize];
+                let v = if *scalar {
+                    Spectrum::splat(f.ch[0].mean)
+                } else {
+                    Spectrum::new(f.ch[0].mean, f.ch[1].mean, f.ch[2].mean)
+                };
+                // `max` maps NaN to 0 as well.
+                v.max(Spectrum::ZERO)
+            }
         }
     }
 
-    /// A scalar value at `uv` (the luminance of a colour texture), as Mitsuba's `eval_1`.
+    /// A scalar value (the luminance of a colour texture), as Mitsuba's `eval_1`.
     #[inline]
-    pub fn eval_float(&self, uv: Vec2) -> f32 {
+    pub fn eval_float(&self, ctx: &ShadeContext) -> f32 {
         match self {
             Texture::Constant(c) if c.x == c.y && c.y == c.z => c.x,
-            _ => luminance(self.eval(uv)),
+            Texture::GraphOutput { slot, scalar: true } => ctx.outputs[*slot as usize].ch[0].mean.max(0.0),
+            _ => luminance(self.eval(ctx)),
         }
     }
 
@@ -192,6 +229,7 @@ impl Texture {
             Texture::Constant(c) => c.max_element(),
             Texture::Checkerboard { color0, color1, .. } => color0.max_element().max(color1.max_element()),
             Texture::Bitmap { image, .. } => image.texels.iter().fold(0.0f32, |m, t| m.max(t.max_element())),
+            Texture::GraphOutput { .. } => f32::INFINITY,
         }
     }
 }
@@ -203,10 +241,10 @@ mod tests {
     #[test]
     fn checkerboard_matches_mitsuba_convention() {
         let t = Texture::Checkerboard { color0: Vec3::splat(0.4), color1: Vec3::splat(0.2), to_uv: Affine2::IDENTITY };
-        assert_eq!(t.eval(Vec2::new(0.25, 0.25)).x, 0.4);
-        assert_eq!(t.eval(Vec2::new(0.75, 0.25)).x, 0.2);
-        assert_eq!(t.eval(Vec2::new(0.75, 0.75)).x, 0.4);
-        assert_eq!(t.eval(Vec2::new(-0.25, 0.25)).x, 0.2);
+        assert_eq!(t.eval(&ShadeContext::uv(Vec2::new(0.25, 0.25))).x, 0.4);
+        assert_eq!(t.eval(&ShadeContext::uv(Vec2::new(0.75, 0.25))).x, 0.2);
+        assert_eq!(t.eval(&ShadeContext::uv(Vec2::new(0.75, 0.75))).x, 0.4);
+        assert_eq!(t.eval(&ShadeContext::uv(Vec2::new(-0.25, 0.25))).x, 0.2);
     }
 
     #[test]

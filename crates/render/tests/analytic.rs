@@ -8,7 +8,8 @@ use render::scene::Scene;
 use std::path::Path;
 
 fn load(xml: &str) -> Scene {
-    render::loader::load_str(xml, Path::new("analytic.xml"), &std::env::temp_dir(), &[]).unwrap_or_else(|e| panic!("{e}"))
+    render::loader::load_str(xml, Path::new("analytic.xml"), &std::env::temp_dir(), &[])
+        .unwrap_or_else(|e| panic!("{e}"))
 }
 
 fn furnace_scene(emitter: &str, bsdf: &str) -> String {

@@ -22,7 +22,13 @@
 //! Sensitivity (so that the test can fail): the same samples are compared with Algorithm 1
 //! without the cross-covariance terms of eq. (14), with the common roughness mistake
 //! `σ = α` (instead of `α/√2`), and, for refraction, with the IOR ratio inverted; each must be
-//! off by several times the tolerance.
+//! off by several times the tolerance (dropping the cross terms: only beyond it in scene (a),
+//! where the diffuse bounce's `var(Δh)` dominates).
+//!
+//! Precision: the renderer traces in `f32`, so `s` cannot be much smaller than 10⁻³ (at 10⁻⁴ the
+//! rounding of hit points adds 10–20 % to the variances). Even at 10⁻³, about 1 % of the glass
+//! sphere's first-vertex variance comes from `intersect_sphere` solving the quadratic as if the
+//! `f32`-normalised direction had unit length (its discriminant error grows like `|o − c|²`).
 
 use footprint::{
     constraint_derivatives, first_vertex_variance, half_vector_variance, FootprintTracker, Scatter, Vertex,
@@ -35,11 +41,12 @@ use render::integrator::spawn_ray;
 use render::pathfootprint::{scatter_of, vertex_of, FootprintMode, PathFootprint};
 use render::sampling::Rng;
 use render::scene::Scene;
+use render::texture::ShadeContext;
 use std::path::Path;
 
 /// Perturbation scale: screen offsets of `s/2` px and slope offsets of `s α/√2`.
 const S: f64 = 1e-3;
-const SAMPLES: usize = 1_000_000;
+const SAMPLES: usize = 100_000;
 /// Relative Frobenius error allowed between prediction and Monte Carlo (sampling noise of
 /// `N = 10⁵` samples is about 0.5–1 %).
 const TOLERANCE: f64 = 0.03;
@@ -215,7 +222,7 @@ fn trace_base(scene: &Scene, nodes: &[Node], film: Vec2) -> Result<BasePath, Str
             break;
         }
         // The event and roughness as the integrator gets them: from a sample of the BSDF here.
-        let bsdf = scene.materials[shape.material as usize].at(si.uv);
+        let bsdf = scene.materials[shape.material as usize].bsdf.at(&ShadeContext::uv(si.uv));
         let wi_local = si.sh.to_local(-ray.d);
         let bs = [(0.999, 0.31, 0.57), (0.999, 0.5, 0.5), (0.999, 0.1, 0.9)]
             .iter()
@@ -256,9 +263,9 @@ fn pick_base(scene: &Scene, nodes: &[Node], preferred: (u32, u32)) -> BasePath {
     let robust = |x: u32, y: u32| {
         let c = film_of((x, y));
         let Ok(base) = trace_base(scene, nodes, c) else { return false };
-        [(M, 0.0), (-M, 0.0), (0.0, M), (0.0, -M)].iter().all(|&(dx, dy)| {
-            trace_base(scene, nodes, c + Vec2::new(dx, dy)).is_ok_and(|p| p.shapes == base.shapes)
-        })
+        [(M, 0.0), (-M, 0.0), (0.0, M), (0.0, -M)]
+            .iter()
+            .all(|&(dx, dy)| trace_base(scene, nodes, c + Vec2::new(dx, dy)).is_ok_and(|p| p.shapes == base.shapes))
     };
     let mut best: Option<((u32, u32), i64)> = None;
     for y in 0..h {
@@ -303,7 +310,14 @@ fn min_rotation(a: DVec3, b: DVec3, v: DVec3) -> DVec3 {
 
 /// Re-traces the base path with a screen offset `dpx` (pixels) and slope offsets `dh`; returns
 /// the vertex positions, or `None` when a vertex lands on another shape.
-fn trace_perturbed(scene: &Scene, bp: &BasePath, scatters: &[Scatter], dpx: DVec2, dh: &[DVec2], frames: FrameMode) -> Option<Vec<DVec3>> {
+fn trace_perturbed(
+    scene: &Scene,
+    bp: &BasePath,
+    scatters: &[Scatter],
+    dpx: DVec2,
+    dh: &[DVec2],
+    frames: FrameMode,
+) -> Option<Vec<DVec3>> {
     let film = bp.film + dpx.as_vec2();
     let mut ray = scene.camera.generate_ray(film).ray;
     let k = bp.vertices.len();
@@ -350,10 +364,7 @@ fn monte_carlo(scene: &Scene, bp: &BasePath, alphas: &[f64], seed: u64, frames: 
     let mut sum2 = vec![DMat2::ZERO; k];
     let mut dh = vec![DVec2::ZERO; k - 1];
     let mut lost = 0usize;
-    let pred_dbg = renderer_prediction(scene, bp);
-    let inv: Vec<DMat2> = pred_dbg.iter().map(|m| m.inverse()).collect();
-    let mut maxm = vec![(0.0f64, 0usize); k];
-    for _si in 0..SAMPLES {
+    for _ in 0..SAMPLES {
         let dpx = normal2(&mut rng) * (S * 0.5);
         for (d, a) in dh.iter_mut().zip(alphas) {
             *d = normal2(&mut rng) * (S * a / std::f64::consts::SQRT_2);
@@ -368,11 +379,8 @@ fn monte_carlo(scene: &Scene, bp: &BasePath, alphas: &[f64], seed: u64, frames: 
             let x = DVec2::new(d.dot(v.t), d.dot(v.b)) / S;
             sum[i] += x;
             sum2[i] += DMat2::from_cols(x * x.x, x * x.y);
-            let m2 = x.dot(inv[i] * x);
-            if m2 > maxm[i].0 { maxm[i] = (m2, _si); }
         }
     }
-    eprintln!("DEBUG max mahalanobis² per vertex: {maxm:?}");
     assert_eq!(lost, 0, "perturbed paths left the base path's surfaces");
     let n = SAMPLES as f64;
     (0..k)
@@ -400,7 +408,8 @@ fn tracker_prediction(bp: &BasePath, scatters: &[Scatter], alphas: &[f64]) -> Ve
     let cam = &bp.cam;
     let o = cam.ray.o.as_dvec3();
     let v = &bp.vertices;
-    let var1 = first_vertex_variance(o, cam.d_unnormalised.as_dvec3(), cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), &v[0]);
+    let var1 =
+        first_vertex_variance(o, cam.d_unnormalised.as_dvec3(), cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), &v[0]);
     let mut tracker = FootprintTracker::start_path(o, &v[0], var1);
     let mut out = vec![var1];
     for i in 0..v.len() - 1 {
@@ -415,7 +424,8 @@ fn no_cross_covariance(bp: &BasePath, scatters: &[Scatter], alphas: &[f64]) -> V
     let o = cam.ray.o.as_dvec3();
     let v = &bp.vertices;
     let camera = Vertex::point(o);
-    let var1 = first_vertex_variance(o, cam.d_unnormalised.as_dvec3(), cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), &v[0]);
+    let var1 =
+        first_vertex_variance(o, cam.d_unnormalised.as_dvec3(), cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), &v[0]);
     let (mut var_pp, mut var_p) = (DMat2::ZERO, var1);
     let mut out = vec![var1];
     for i in 0..v.len() - 1 {
@@ -455,7 +465,11 @@ fn check(name: &str, scene: &Scene, nodes: &[Node], preferred: (u32, u32), seed:
     let pred = renderer_prediction(scene, &bp);
     let direct = tracker_prediction(&bp, &scatters, &alphas);
     for i in 0..k {
-        assert!(rel_err(direct[i], pred[i]) < 1e-12, "{name} vertex {}: PathFootprint differs from FootprintTracker", i + 1);
+        assert!(
+            rel_err(direct[i], pred[i]) < 1e-12,
+            "{name} vertex {}: PathFootprint differs from FootprintTracker",
+            i + 1
+        );
     }
     let mc = monte_carlo(scene, &bp, &alphas, seed, FrameMode::Renderer);
 
@@ -589,26 +603,39 @@ fn mirror_chain() {
     assert!(s.no_cross > SENSITIVITY * TOLERANCE, "dropping the cross-covariance went unnoticed: {s:?}");
 }
 
-
+/// Where the base slope at a curved vertex is off-specular, the perturbed paths' half vectors
+/// depend on how the frame is carried to the perturbed vertex: the tracker's `B_i` assumes the
+/// tangent frame turns minimally with the normal (`dt = −n (t·dn)`), whereas a sphere's shading
+/// frame follows `∂p/∂u` (the parallels), which also twists about `n` (by `cos θ dφ`). With the
+/// frame carried by minimal rotation the prediction matches; with the renderer's own frame it
+/// need not (a first-order difference proportional to the base slope). Real paths sample an
+/// isotropic lobe afresh at every vertex, so for isotropic roughness neither choice is "the"
+/// renderer's behaviour; this test pins the convention the tracker implements.
 #[test]
-fn zz_debug() {
-    let shapes = room(MIRROR, DIFFUSE, DIFFUSE)
-        + &sphere("ballA", [0.6, 1.0, -1.0], 0.8, MIRROR)
-        + &sphere("ballB", [-2.6, 2.1, 0.2], 0.7, MIRROR);
-    // Narrow field of view: the paths that reach the second sphere are few pixels wide otherwise.
-    let scene = load(&scene_xml(10.0, "0, 2.5, 6", "0.03, 0, 1.6", &shapes));
-    let nodes = vec![
-        node("floor", Leave::Slope(0.02, 0.03), 0.0),
-        node("ballA", Leave::Slope(0.0, 0.0), 0.0),
-        node("ballB", Leave::Slope(0.0, 0.0), 0.0),
-        end(None),
-    ];
-    for y in 0..32 {
-        for x in 0..32 {
-            let f = Vec2::new(x as f32 * 2.0, y as f32 * 2.0);
-            if let Ok(bp) = trace_base(&scene, &nodes, f) {
-                eprintln!("{f} {} {:?} x1 {:?}", scene.shapes[bp.shapes[3] as usize].name, bp.vertices[3].p, bp.vertices[0].p);
-            }
-        }
+fn off_specular_slope_on_a_sphere_uses_minimally_rotated_frames() {
+    let (scene, nodes) = glossy_scene((0.12, -0.08));
+    let bp = pick_base(&scene, &nodes, (36, 44));
+    let alphas: Vec<f64> = bp.samples.iter().map(|s| s.alpha as f64).collect();
+    let pred = renderer_prediction(&scene, &bp);
+    let transported = monte_carlo(&scene, &bp, &alphas, 4, FrameMode::Transported);
+    let own = monte_carlo(&scene, &bp, &alphas, 4, FrameMode::Renderer);
+    eprintln!("\n== (a') as (a) with slope (0.12, -0.08) at the sphere: film {}", bp.film);
+    eprintln!(
+        "{:>3} {:>6} | {:^34} | {:>11} | {:>11}",
+        "x", "shape", "predicted [xx xy yy]/s²", "transported", "own frame"
+    );
+    for i in 0..pred.len() {
+        eprintln!(
+            "{:>3} {:>6} | {} | {:11.4} | {:11.4}",
+            i + 1,
+            scene.shapes[bp.shapes[i] as usize].name,
+            fmt(pred[i]),
+            rel_err(transported[i], pred[i]),
+            rel_err(own[i], pred[i])
+        );
+    }
+    for i in 0..pred.len() {
+        let e = rel_err(transported[i], pred[i]);
+        assert!(e < TOLERANCE, "vertex {}: relative error {e:.4}", i + 1);
     }
 }

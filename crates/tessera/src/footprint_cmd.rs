@@ -108,7 +108,8 @@ pub fn run(args: FootprintArgs) -> Result<()> {
     let offset = scene.rfilter.sample(|| rng.next_f32());
     let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset);
     let mut rec = Recorder { density: args.density, vertices: Vec::new() };
-    let l = radiance(&scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut rec);
+    let mut shade = render::shading::ShadeScratch::new(&scene.graphs, &scene.materials);
+    let l = radiance(&scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut rec);
     // A vertex without an event is where a path ended by Russian roulette after scattering.
     let out = json!({
         "schema": "tessera.footprint/1",

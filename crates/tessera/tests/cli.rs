@@ -143,7 +143,8 @@ fn footprint_command_prints_a_consistent_path() {
         assert!(vx["lod"].as_f64().unwrap().is_finite());
     }
     // Out-of-image pixels are an error.
-    let bad = tessera().arg("footprint").arg(refs_scene("dielectrics.xml")).args(["--pixel", "999", "0"]).output().unwrap();
+    let bad =
+        tessera().arg("footprint").arg(refs_scene("dielectrics.xml")).args(["--pixel", "999", "0"]).output().unwrap();
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("outside"));
 }

@@ -36,7 +36,7 @@ pub use roughconductor::RoughConductor;
 pub use roughdielectric::RoughDielectric;
 
 use crate::math::Spectrum;
-use crate::texture::Texture;
+use crate::texture::{ShadeContext, Texture};
 use glam::{Vec2, Vec3};
 
 /// Mitsuba's default interior IOR of dielectrics (`bk7`).
@@ -236,10 +236,10 @@ pub enum BsdfDesc {
         specular_reflectance: Texture,
         /// Normal distribution (default Beckmann).
         distribution: MicrofacetKind,
-        /// Roughness along the tangent (default 0.1; `alpha` sets both).
-        alpha_u: f32,
+        /// Roughness along the tangent (default 0.1; `alpha` sets both); a float texture.
+        alpha_u: Texture,
         /// Roughness along the bitangent.
-        alpha_v: f32,
+        alpha_v: Texture,
     },
     /// Mitsuba `dielectric` (smooth).
     Dielectric {
@@ -260,10 +260,10 @@ pub enum BsdfDesc {
         specular_transmittance: Texture,
         /// Normal distribution (default Beckmann).
         distribution: MicrofacetKind,
-        /// Roughness along the tangent (default 0.1).
-        alpha_u: f32,
+        /// Roughness along the tangent (default 0.1); a float texture.
+        alpha_u: Texture,
         /// Roughness along the bitangent.
-        alpha_v: f32,
+        alpha_v: Texture,
     },
     /// Mitsuba `twosided`: the nested BSDF on both faces.
     TwoSided(Box<BsdfDesc>),
@@ -277,29 +277,29 @@ impl Default for BsdfDesc {
 }
 
 impl BsdfDesc {
-    /// Evaluates the textures at `uv` (no allocation).
-    pub fn at(&self, uv: Vec2) -> Bsdf {
+    /// Evaluates the textures at the shading point (no allocation).
+    pub fn at(&self, ctx: &ShadeContext) -> Bsdf {
         let model = match self {
-            BsdfDesc::TwoSided(inner) => return inner.at(uv).two_sided(),
-            BsdfDesc::Diffuse { reflectance } => BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(uv) }),
+            BsdfDesc::TwoSided(inner) => return inner.at(ctx).two_sided(),
+            BsdfDesc::Diffuse { reflectance } => BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(ctx) }),
             BsdfDesc::Conductor { eta, k, specular_reflectance } => BsdfModel::Conductor(Conductor {
                 eta: *eta,
                 k: *k,
-                specular_reflectance: specular_reflectance.eval(uv),
+                specular_reflectance: specular_reflectance.eval(ctx),
             }),
             BsdfDesc::RoughConductor { eta, k, specular_reflectance, distribution, alpha_u, alpha_v } => {
                 BsdfModel::RoughConductor(RoughConductor {
-                    distribution: Microfacet::new(*distribution, *alpha_u, *alpha_v),
+                    distribution: Microfacet::new(*distribution, alpha_u.eval_float(ctx), alpha_v.eval_float(ctx)),
                     eta: *eta,
                     k: *k,
-                    specular_reflectance: specular_reflectance.eval(uv),
+                    specular_reflectance: specular_reflectance.eval(ctx),
                 })
             }
             BsdfDesc::Dielectric { eta, specular_reflectance, specular_transmittance } => {
                 BsdfModel::Dielectric(Dielectric {
                     eta: *eta,
-                    specular_reflectance: specular_reflectance.eval(uv),
-                    specular_transmittance: specular_transmittance.eval(uv),
+                    specular_reflectance: specular_reflectance.eval(ctx),
+                    specular_transmittance: specular_transmittance.eval(ctx),
                 })
             }
             BsdfDesc::RoughDielectric {
@@ -310,10 +310,10 @@ impl BsdfDesc {
                 alpha_u,
                 alpha_v,
             } => BsdfModel::RoughDielectric(RoughDielectric {
-                distribution: Microfacet::new(*distribution, *alpha_u, *alpha_v),
+                distribution: Microfacet::new(*distribution, alpha_u.eval_float(ctx), alpha_v.eval_float(ctx)),
                 eta: *eta,
-                specular_reflectance: specular_reflectance.eval(uv),
-                specular_transmittance: specular_transmittance.eval(uv),
+                specular_reflectance: specular_reflectance.eval(ctx),
+                specular_transmittance: specular_transmittance.eval(ctx),
             }),
         };
         Bsdf::new(model)

@@ -753,8 +753,8 @@ fn bsdf_desc_evaluates_textures() {
         to_uv: Affine2::IDENTITY,
     };
     let desc = BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: checker }));
-    let a = desc.at(Vec2::new(0.25, 0.25));
-    let c = desc.at(Vec2::new(0.75, 0.25));
+    let a = desc.at(&ShadeContext::uv(Vec2::new(0.25, 0.25)));
+    let c = desc.at(&ShadeContext::uv(Vec2::new(0.75, 0.25)));
     assert!(a.two_sided && desc.has_smooth());
     match (a.model, c.model) {
         (BsdfModel::Diffuse(x), BsdfModel::Diffuse(y)) => {
@@ -763,7 +763,7 @@ fn bsdf_desc_evaluates_textures() {
         }
         _ => panic!("wrong model"),
     }
-    match BsdfDesc::default().at(Vec2::ZERO).model {
+    match BsdfDesc::default().at(&ShadeContext::uv(Vec2::ZERO)).model {
         BsdfModel::Diffuse(d) => assert_eq!(d.reflectance, Spectrum::splat(0.5)),
         _ => panic!(),
     }
@@ -773,10 +773,10 @@ fn bsdf_desc_evaluates_textures() {
         k,
         specular_reflectance: Texture::Constant(Spectrum::ONE),
         distribution: MicrofacetKind::Ggx,
-        alpha_u: 0.0,
-        alpha_v: 0.3,
+        alpha_u: Texture::Constant(Spectrum::splat(0.0)),
+        alpha_v: Texture::Constant(Spectrum::splat(0.3)),
     };
-    match rc.at(Vec2::ZERO).model {
+    match rc.at(&ShadeContext::uv(Vec2::ZERO)).model {
         BsdfModel::RoughConductor(r) => {
             assert_eq!(r.distribution.alpha_u, microfacet::MIN_ALPHA, "α clamped like Mitsuba");
             assert_eq!(r.distribution.kind, MicrofacetKind::Ggx);
@@ -788,7 +788,7 @@ fn bsdf_desc_evaluates_textures() {
         specular_reflectance: Texture::Constant(Spectrum::ONE),
         specular_transmittance: Texture::Constant(Spectrum::ONE),
     };
-    assert!(!d.has_smooth() && !d.at(Vec2::ZERO).has_smooth());
+    assert!(!d.has_smooth() && !d.at(&ShadeContext::uv(Vec2::ZERO)).has_smooth());
     assert!(conductor_preset("Xx").is_none());
     assert_eq!(dielectric_ior_preset("bk7"), Some(1.5046));
     assert_eq!(beckmann_equivalent_alpha(MicrofacetKind::Beckmann, 0.3), 0.3);

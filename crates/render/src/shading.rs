@@ -1,0 +1,98 @@
+//! Materials whose parameters come from procedural graphs, and the per-thread memory that
+//! evaluates those graphs at each shading point.
+//!
+//! A [`Material`] is a [`BsdfDesc`] plus the graph outputs its textures read. Before the BSDF is
+//! built at a hit, [`ShadeScratch::evaluate`] evaluates every output the material needs, filtered
+//! to the hit's uv footprint, in one pass per graph (shared upstream nodes are evaluated once);
+//! [`crate::texture::Texture::GraphOutput`] then reads them by slot.
+
+use crate::bsdf::BsdfDesc;
+use graph::{EvalPlan, EvalScratch, EvalStats, Filtered, Footprint, Graph, NoOverride};
+use std::sync::Arc;
+
+/// A procedural graph used by the scene (one per MaterialX document).
+#[derive(Debug)]
+pub struct SceneGraph {
+    /// The document it came from (for reports).
+    pub name: String,
+    /// The loaded document; its graph holds every nodegraph of the file.
+    pub document: Arc<graph::Document>,
+}
+
+impl SceneGraph {
+    /// The graph.
+    pub fn graph(&self) -> &Graph {
+        self.document.graph()
+    }
+}
+
+/// The outputs of one graph that a material reads.
+#[derive(Clone, Debug)]
+pub struct MaterialGraph {
+    /// Index into the scene's graphs.
+    pub graph: u32,
+    /// Evaluation plan over the outputs.
+    pub plan: EvalPlan,
+    /// For each output of `plan`, the slot its value goes to.
+    pub slots: Vec<u32>,
+}
+
+/// A BSDF and the graph outputs its textures read.
+#[derive(Clone, Debug)]
+pub struct Material {
+    /// The BSDF with its (possibly graph-valued) textures.
+    pub bsdf: BsdfDesc,
+    /// Graph outputs to evaluate before building the BSDF; empty for plain Mitsuba materials.
+    pub graphs: Vec<MaterialGraph>,
+    /// Number of slots the outputs fill.
+    pub slot_count: u32,
+}
+
+impl Material {
+    /// A material without procedural textures.
+    pub fn plain(bsdf: BsdfDesc) -> Self {
+        Material { bsdf, graphs: Vec::new(), slot_count: 0 }
+    }
+}
+
+/// Per-thread graph evaluation memory and statistics (allocated once per thread or tile).
+pub struct ShadeScratch {
+    scratches: Vec<EvalScratch>,
+    outputs: Vec<Filtered>,
+    tmp: Vec<Filtered>,
+}
+
+impl ShadeScratch {
+    /// Scratch for every graph of a scene and the largest material.
+    pub fn new(graphs: &[SceneGraph], materials: &[Material]) -> Self {
+        let slots = materials.iter().map(|m| m.slot_count as usize).max().unwrap_or(0);
+        let per_graph = materials.iter().flat_map(|m| m.graphs.iter().map(|g| g.slots.len())).max().unwrap_or(0);
+        let zero = Filtered::constant(graph::Value::float(0.0));
+        ShadeScratch {
+            scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
+            outputs: vec![zero; slots],
+            tmp: vec![zero; per_graph],
+        }
+    }
+
+    /// Evaluates `material`'s graph outputs at footprint `fp`; returns them by slot.
+    pub fn evaluate(&mut self, graphs: &[SceneGraph], material: &Material, fp: &Footprint) -> &[Filtered] {
+        for mg in &material.graphs {
+            let g = graphs[mg.graph as usize].graph();
+            let n = mg.slots.len();
+            g.eval(&mg.plan, fp, &mut self.scratches[mg.graph as usize], &NoOverride, &mut self.tmp[..n]);
+            for (k, &slot) in mg.slots.iter().enumerate() {
+                self.outputs[slot as usize] = self.tmp[k];
+            }
+        }
+        &self.outputs[..material.slot_count as usize]
+    }
+
+    /// Adds this scratch's per-node statistics to `stats` (one entry per scene graph).
+    pub fn merge_stats_into(&self, stats: &mut Vec<EvalStats>) {
+        stats.resize(self.scratches.len(), EvalStats::default());
+        for (s, out) in self.scratches.iter().zip(stats.iter_mut()) {
+            s.merge_stats_into(out);
+        }
+    }
+}
