@@ -181,6 +181,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
             total_rays as f64 / render_s / 1e6,
             names.join(", ")
         );
+        let node_evals: u64 = out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum();
+        if node_evals > 0 {
+            eprintln!(
+                "procedural textures: {node_evals} node evaluations ({:.1} per sample) in {} graph(s)",
+                node_evals as f64 / c.samples.max(1) as f64,
+                scene.graphs.len()
+            );
+        }
         if c.nonfinite_samples > 0 {
             eprintln!("warning: {} samples had NaN or infinite radiance and were discarded", c.nonfinite_samples);
         }
@@ -208,10 +216,40 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 "samples_per_s": c.samples as f64 / render_s,
                 "rays_per_s": total_rays as f64 / render_s,
             },
+            "graphs": graph_stats_json(&scene, &out.graph_stats),
         });
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// Per graph: its document and, per node, the filtered evaluations the render made.
+fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Value {
+    let graphs: Vec<serde_json::Value> = scene
+        .graphs
+        .iter()
+        .zip(stats)
+        .map(|(sg, st)| {
+            let g = sg.graph();
+            let nodes: Vec<serde_json::Value> = g
+                .node_ids()
+                .map(|id| {
+                    json!({
+                        "name": g.node_name(id),
+                        "category": g.node_category(id),
+                        "evaluations": st.evaluations.get(id.0 as usize).copied().unwrap_or(0),
+                        "lookups": st.lookups.get(id.0 as usize).copied().unwrap_or(0),
+                    })
+                })
+                .collect();
+            json!({
+                "document": sg.name,
+                "nodes": nodes,
+                "work": { "octaves": st.work.octaves, "lattice": st.work.lattice },
+            })
+        })
+        .collect();
+    serde_json::Value::Array(graphs)
 }
 
 /// Loads a scene file, or the embedded demo scene when none is given.
