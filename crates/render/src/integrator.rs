@@ -78,12 +78,21 @@ pub struct RenderSettings {
     pub footprint: FootprintMode,
     /// When set, also produce the footprint AOV with this many texels per uv unit.
     pub footprint_aov_density: Option<f64>,
+    /// Replace every graph output by its mean over the texture: the free-texture lower bound
+    /// on render time.
+    pub free_textures: bool,
 }
 
 impl RenderSettings {
     /// `spp` samples with `seed` and the default (covariance) footprints.
     pub fn new(spp: u32, seed: u64) -> Self {
-        RenderSettings { spp, seed, footprint: FootprintMode::default(), footprint_aov_density: None }
+        RenderSettings {
+            spp,
+            seed,
+            footprint: FootprintMode::default(),
+            footprint_aov_density: None,
+            free_textures: false,
+        }
     }
 }
 
@@ -318,7 +327,8 @@ pub fn radiance<O: PathObserver>(
     // Footprint state: the estimator, the previous vertex and what was sampled there.
     // Footprints cost a few hundred nanoseconds per bounce: track them only when a material's
     // textures or the observer will read them.
-    let track = settings_r.footprint != FootprintMode::None && (scene.footprints_needed || O::WANTS_FOOTPRINTS);
+    let track = settings_r.footprint != FootprintMode::None
+        && ((scene.footprints_needed && !settings_r.free_textures) || O::WANTS_FOOTPRINTS);
     let mut fp = PathFootprint::None;
     let mut prev_vertex: Option<Vertex> = None;
     let mut prev_bs: Option<crate::bsdf::BsdfSample> = None;
@@ -372,6 +382,8 @@ pub fn radiance<O: PathObserver>(
         let material = &scene.materials[shape.material as usize];
         let outputs: &[graph::Filtered] = if material.graphs.is_empty() {
             &[]
+        } else if settings_r.free_textures {
+            &material.constant_outputs
         } else {
             // Procedural textures are filtered to the vertex's uv footprint (a point without one).
             let cov = match &vertex {

@@ -639,7 +639,9 @@ impl Builder {
             graphs.push(MaterialGraph { graph: g, plan, slots });
         }
         self.pending_outputs.clear();
-        Material { bsdf, graphs, slot_count }
+        let mut m = Material { bsdf, graphs, slot_count, constant_outputs: Vec::new() };
+        m.compute_constant_outputs(&self.graphs);
+        m
     }
 
     /// Loads (once) the MaterialX document `file` named by `obj`; returns its graph index.

@@ -46,12 +46,36 @@ pub struct Material {
     pub graphs: Vec<MaterialGraph>,
     /// Number of slots the outputs fill.
     pub slot_count: u32,
+    /// Each slot's value averaged over the whole texture (the graph evaluated with a huge
+    /// footprint): what the free-texture lower bound renders with.
+    pub constant_outputs: Vec<Filtered>,
 }
 
 impl Material {
+    /// Fills [`Material::constant_outputs`]: every output evaluated with a footprint far larger
+    /// than any feature (σ = 100 uv units), i.e. its mean over the plane.
+    pub fn compute_constant_outputs(&mut self, graphs: &[SceneGraph]) {
+        let zero = Filtered::constant(graph::Value::float(0.0));
+        self.constant_outputs = vec![zero; self.slot_count as usize];
+        let fp = Footprint::isotropic(glam::Vec2::splat(0.5), 100.0);
+        for mg in &self.graphs {
+            let g = graphs[mg.graph as usize].graph();
+            let mut scratch = EvalScratch::new(g);
+            let mut tmp = vec![zero; mg.slots.len()];
+            g.eval(&mg.plan, &fp, &mut scratch, &NoOverride, &mut tmp);
+            for (k, &slot) in mg.slots.iter().enumerate() {
+                let mut c = tmp[k];
+                for m in c.ch.iter_mut() {
+                    *m = graph::Moments::constant(m.mean);
+                }
+                self.constant_outputs[slot as usize] = c;
+            }
+        }
+    }
+
     /// A material without procedural textures.
     pub fn plain(bsdf: BsdfDesc) -> Self {
-        Material { bsdf, graphs: Vec::new(), slot_count: 0 }
+        Material { bsdf, graphs: Vec::new(), slot_count: 0, constant_outputs: Vec::new() }
     }
 }
 
@@ -76,6 +100,7 @@ impl ShadeScratch {
     }
 
     /// Evaluates `material`'s graph outputs at footprint `fp`; returns them by slot.
+    #[inline]
     pub fn evaluate(&mut self, graphs: &[SceneGraph], material: &Material, fp: &Footprint) -> &[Filtered] {
         for mg in &material.graphs {
             let g = graphs[mg.graph as usize].graph();

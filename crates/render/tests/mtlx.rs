@@ -97,3 +97,21 @@ fn bad_graph_bindings_are_clear_errors() {
     let e = err(r#"<texture type="mtlx" name="reflectance"><string name="filename" value="checker.mtlx"/></texture>"#);
     assert!(e.contains("output"), "{e}");
 }
+
+#[test]
+fn free_textures_evaluate_no_node_and_keep_the_mean() {
+    let scene = load(&grazing_scene(&checker_texture()));
+    let free = render(&scene, RenderSettings { free_textures: true, ..RenderSettings::new(2, 1) }, &|_| {});
+    assert!(free.graph_stats.iter().all(|g| g.evaluations.iter().all(|&e| e == 0)));
+    // The constant is the checkerboard's mean reflectance: in the far field, where the filtered
+    // render has converged to that mean, the two agree.
+    let filtered = render(&scene, RenderSettings::new(16, 1), &|_| {}).image;
+    let (mut a, mut b) = (0.0, 0.0);
+    for x in 0..64 {
+        for y in 24..27 {
+            a += free.image.get(x, y).x;
+            b += filtered.get(x, y).x;
+        }
+    }
+    assert!(a > 0.0 && (a - b).abs() < 0.05 * a, "free {a} filtered {b}");
+}

@@ -65,6 +65,10 @@ struct RenderArgs {
     /// R, G, B) and <out>.footprint.png (a heat map).
     #[arg(long, value_parser = ["footprint"])]
     aov: Vec<String>,
+    /// Replace every procedural texture by its mean value: the free-texture lower bound on
+    /// render time (for benchmarks).
+    #[arg(long)]
+    free_textures: bool,
     /// Texels per uv unit at level 0 for footprint LODs in AOVs.
     #[arg(long, default_value_t = 1024.0)]
     aov_density: f64,
@@ -150,6 +154,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let settings = RenderSettings {
         footprint: args.footprint,
         footprint_aov_density: want_aov.then_some(args.aov_density),
+        free_textures: args.free_textures,
         ..RenderSettings::new(spp, seed)
     };
     let out = pool.install(|| render(&scene, settings, &|n| bar.inc(n)));
