@@ -136,6 +136,16 @@ struct TriPrim {
     e2: Vec3,
 }
 
+/// Ray queries against a scene's primitives: the seam behind which a BVH backend sits. The
+/// renderer uses [`Accel`] (the `obvhs` crate's compressed wide BVH); another backend (Embree,
+/// say) would implement this trait behind a cargo feature and be chosen in the loader.
+pub trait Intersector: Send + Sync {
+    /// The closest hit along `ray`, if any.
+    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit>;
+    /// True when anything blocks `ray` within its interval.
+    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool;
+}
+
 /// The acceleration structure over all primitives of a scene.
 pub struct Accel {
     bvh: obvhs::cwbvh::CwBvh,
@@ -337,8 +347,10 @@ impl Accel {
         }
     }
 
-    /// The closest hit along `ray`, if any.
-    pub fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+}
+
+impl Intersector for Accel {
+    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
         if self.prims.is_empty() {
             return None;
         }
@@ -362,8 +374,7 @@ impl Accel {
         Some(PreliminaryHit { t: hit.t, shape: pr.shape, index: pr.index, bary: best_bary })
     }
 
-    /// True when anything blocks `ray` within its interval.
-    pub fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
+    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
         if self.prims.is_empty() {
             return false;
         }

@@ -137,7 +137,7 @@ impl Builder {
             // Mitsuba renders black without lights; so do we, but say so.
             eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
         }
-        let accel = Accel::build(&self.shapes);
+        let accel: Box<dyn crate::geometry::Intersector> = Box::new(Accel::build(&self.shapes));
         let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
         let infinite =
             self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();

@@ -3,7 +3,7 @@
 
 use crate::camera::{Camera, Rfilter};
 use crate::emitter::Emitter;
-use crate::geometry::{Accel, Shape};
+use crate::geometry::{Intersector, Shape};
 use crate::shading::{Material, SceneGraph};
 
 /// Settings of Mitsuba's `path` integrator.
@@ -20,7 +20,7 @@ pub struct Scene {
     /// Shapes (world space).
     pub shapes: Vec<Shape>,
     /// BVH over the shapes.
-    pub accel: Accel,
+    pub accel: Box<dyn Intersector>,
     /// Materials; shapes refer to them by index.
     pub materials: Vec<Material>,
     /// Procedural graphs the materials read (one per MaterialX document).
