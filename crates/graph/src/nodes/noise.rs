@@ -328,7 +328,9 @@ fn perlin_octave(
         }
         return false;
     }
-    let se = s.min(DVec2::splat(PERLIN_SIGMA_EXACT));
+    // One axis may have no spread at all (a coordinate channel that is constant): give it a
+    // negligible one, since the exact corner integrals divide by σ.
+    let se = s.min(DVec2::splat(PERLIN_SIGMA_EXACT)).max(DVec2::splat(1e-4));
     let mut r = [(0.0, 0.0, 0.0); 4];
     // Channels with equal offsets share one corner sum.
     let same_offset = offsets.iter().all(|o| *o == offsets[0]);
@@ -493,6 +495,11 @@ fn cellnoise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let se = s.min(DVec2::splat(CELL_SIGMA_EXACT));
     // Per-axis cell masses and their derivatives with respect to the mean.
     let axis = |m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]| -> usize {
+        if !(s > 1e-12) {
+            // No spread along this axis (e.g. a constant coordinate channel): one cell, all mass.
+            buf[0] = (m.floor() as i32, 1.0, 0.0);
+            return 1;
+        }
         let lo = (m - 4.0 * s).floor() as i32;
         let hi = (m + 4.0 * s).floor() as i32;
         let mut n = 0;
