@@ -346,7 +346,6 @@ impl Accel {
             ShapeGeometry::Mesh { .. } => None,
         }
     }
-
 }
 
 impl Intersector for Accel {

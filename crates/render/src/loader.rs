@@ -502,9 +502,10 @@ impl Builder {
                     _ => return Err(obj.error("twosided with a different BSDF on each side is not supported; give one nested <bsdf>")),
                 }
             }
+            "mtlx" => self.mtlx_material(obj)?,
             other => {
                 return Err(obj.error(format!(
-                    "unknown bsdf '{other}' (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided)"
+                    "unknown bsdf '{other}' (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided, mtlx)"
                 )))
             }
         };
@@ -642,6 +643,69 @@ impl Builder {
         let mut m = Material { bsdf, graphs, slot_count, constant_outputs: Vec::new() };
         m.compute_constant_outputs(&self.graphs);
         m
+    }
+
+    /// `<bsdf type="mtlx">`: a MaterialX `standard_surface` material, its inputs constants or
+    /// graph outputs.
+    fn mtlx_material(&mut self, obj: &Object) -> Result<BsdfDesc> {
+        let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("mtlx bsdf needs a 'filename'"))?;
+        let name = obj.opt_string("material")?.ok_or_else(|| obj.error("mtlx bsdf needs a 'material' name"))?;
+        let (g, doc) = self.document(obj, &file)?;
+        let binding = doc.material(&name).ok_or_else(|| {
+            obj.error_at(
+                "material",
+                format!("no material '{name}' in {file} (materials: {})", doc.material_names().join(", ")),
+            )
+        })?;
+        for w in &binding.warnings {
+            eprintln!("warning: {}: {w}", obj.loc);
+        }
+        let input = |this: &mut Self, input: &str, default: Vec3| -> Result<Texture> {
+            match binding.get(input) {
+                Some(graph::MaterialSource::Output(out)) => this.graph_texture(obj, g, *out, false),
+                Some(graph::MaterialSource::Constant(v)) => {
+                    let c = v.channels();
+                    let rgb = if c.len() >= 3 { Vec3::new(c[0], c[1], c[2]) } else { Vec3::splat(c[0]) };
+                    if !rgb.is_finite() || rgb.min_element() < 0.0 {
+                        return Err(obj.error(format!(
+                            "{file}: material '{name}' input {input} must be finite and non-negative, got {rgb}"
+                        )));
+                    }
+                    Ok(Texture::Constant(rgb))
+                }
+                _ => Ok(Texture::Constant(default)),
+            }
+        };
+        let desc = BsdfDesc::StandardSurface {
+            base: input(self, "base", Vec3::splat(0.8))?,
+            base_color: input(self, "base_color", Vec3::ONE)?,
+            metalness: input(self, "metalness", Vec3::ZERO)?,
+            specular: input(self, "specular", Vec3::ONE)?,
+            specular_color: input(self, "specular_color", Vec3::ONE)?,
+            specular_roughness: input(self, "specular_roughness", Vec3::splat(0.2))?,
+            specular_ior: input(self, "specular_IOR", Vec3::splat(1.5))?,
+            transmission: input(self, "transmission", Vec3::ZERO)?,
+            transmission_color: input(self, "transmission_color", Vec3::ONE)?,
+        };
+        // Inputs tessera does not render: say so once, naming them.
+        let mut ignored = Vec::new();
+        if let Some(src) = binding.get("opacity") {
+            let opaque = matches!(src, graph::MaterialSource::Constant(v) if v.channels().iter().all(|&x| x == 1.0));
+            if !opaque {
+                ignored.push("opacity");
+            }
+        }
+        if let Some(graph::MaterialSource::Output(_)) = binding.get("normal") {
+            ignored.push("normal");
+        }
+        if !ignored.is_empty() {
+            eprintln!(
+                "warning: {}: material '{name}' sets {} which tessera does not render yet; rendered as opaque with the geometric shading normal",
+                obj.loc,
+                ignored.join(" and ")
+            );
+        }
+        Ok(desc)
     }
 
     /// Loads (once) the MaterialX document `file` named by `obj`; returns its graph index.

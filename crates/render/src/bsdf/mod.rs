@@ -24,6 +24,7 @@ pub mod microfacet;
 pub mod roughconductor;
 pub mod roughdielectric;
 mod special;
+pub mod standard_surface;
 #[cfg(test)]
 mod tests;
 
@@ -91,6 +92,8 @@ pub enum BsdfModel {
     Dielectric(Dielectric),
     /// Microfacet dielectric interface.
     RoughDielectric(RoughDielectric),
+    /// Autodesk Standard Surface (MaterialX `standard_surface`) subset.
+    StandardSurface(standard_surface::StandardSurface),
 }
 
 /// A BSDF with its textures already evaluated at a hit point (cheap, `Copy`, no allocation).
@@ -169,7 +172,13 @@ impl Bsdf {
 
     /// True if the BSDF has a non-delta lobe (the integrator then samples emitters).
     pub fn has_smooth(&self) -> bool {
-        matches!(self.model, BsdfModel::Diffuse(_) | BsdfModel::RoughConductor(_) | BsdfModel::RoughDielectric(_))
+        matches!(
+            self.model,
+            BsdfModel::Diffuse(_)
+                | BsdfModel::RoughConductor(_)
+                | BsdfModel::RoughDielectric(_)
+                | BsdfModel::StandardSurface(_)
+        )
     }
 }
 
@@ -181,6 +190,7 @@ impl BsdfModel {
             BsdfModel::RoughConductor(b) => b.sample(wi, u),
             BsdfModel::Dielectric(b) => b.sample(wi, u_lobe),
             BsdfModel::RoughDielectric(b) => b.sample(wi, u_lobe, u),
+            BsdfModel::StandardSurface(b) => b.sample(wi, u_lobe, u),
         }
     }
 
@@ -190,6 +200,7 @@ impl BsdfModel {
             BsdfModel::Conductor(_) | BsdfModel::Dielectric(_) => (Spectrum::ZERO, 0.0),
             BsdfModel::RoughConductor(b) => b.eval_pdf(wi, wo),
             BsdfModel::RoughDielectric(b) => b.eval_pdf(wi, wo),
+            BsdfModel::StandardSurface(b) => b.eval_pdf(wi, wo),
         }
     }
 
@@ -265,6 +276,28 @@ pub enum BsdfDesc {
         /// Roughness along the bitangent.
         alpha_v: Texture,
     },
+    /// Autodesk Standard Surface / MaterialX `standard_surface` (see [`standard_surface`] for
+    /// the subset rendered and the defaults). Scalar inputs are float textures.
+    StandardSurface {
+        /// `base` (default 0.8).
+        base: Texture,
+        /// `base_color` (default 1).
+        base_color: Texture,
+        /// `metalness` (default 0).
+        metalness: Texture,
+        /// `specular` (default 1).
+        specular: Texture,
+        /// `specular_color` (default 1).
+        specular_color: Texture,
+        /// `specular_roughness` (default 0.2); GGX `α = roughness²`.
+        specular_roughness: Texture,
+        /// `specular_IOR` (default 1.5).
+        specular_ior: Texture,
+        /// `transmission` (default 0).
+        transmission: Texture,
+        /// `transmission_color` (default 1).
+        transmission_color: Texture,
+    },
     /// Mitsuba `twosided`: the nested BSDF on both faces.
     TwoSided(Box<BsdfDesc>),
 }
@@ -315,6 +348,29 @@ impl BsdfDesc {
                 specular_reflectance: specular_reflectance.eval(ctx),
                 specular_transmittance: specular_transmittance.eval(ctx),
             }),
+            BsdfDesc::StandardSurface {
+                base,
+                base_color,
+                metalness,
+                specular,
+                specular_color,
+                specular_roughness,
+                specular_ior,
+                transmission,
+                transmission_color,
+            } => BsdfModel::StandardSurface(standard_surface::StandardSurface::new(
+                &standard_surface::StandardSurfaceParams {
+                    base: base.eval_float(ctx),
+                    base_color: base_color.eval(ctx),
+                    metalness: metalness.eval_float(ctx),
+                    specular: specular.eval_float(ctx),
+                    specular_color: specular_color.eval(ctx),
+                    specular_roughness: specular_roughness.eval_float(ctx),
+                    specular_ior: specular_ior.eval_float(ctx),
+                    transmission: transmission.eval_float(ctx),
+                    transmission_color: transmission_color.eval(ctx),
+                },
+            )),
         };
         Bsdf::new(model)
     }
@@ -323,7 +379,10 @@ impl BsdfDesc {
     pub fn has_smooth(&self) -> bool {
         match self {
             BsdfDesc::TwoSided(inner) => inner.has_smooth(),
-            BsdfDesc::Diffuse { .. } | BsdfDesc::RoughConductor { .. } | BsdfDesc::RoughDielectric { .. } => true,
+            BsdfDesc::Diffuse { .. }
+            | BsdfDesc::RoughConductor { .. }
+            | BsdfDesc::RoughDielectric { .. }
+            | BsdfDesc::StandardSurface { .. } => true,
             BsdfDesc::Conductor { .. } | BsdfDesc::Dielectric { .. } => false,
         }
     }

@@ -865,3 +865,527 @@ fn bsdf_never_returns_nan() {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Autodesk Standard Surface (MaterialX standard_surface)
+
+use super::standard_surface::{StandardSurface, StandardSurfaceParams};
+
+/// A standard surface with MaterialX defaults changed by `f`.
+fn std_surface(f: impl FnOnce(&mut StandardSurfaceParams)) -> Bsdf {
+    let mut p = StandardSurfaceParams::DEFAULT;
+    f(&mut p);
+    Bsdf::new(BsdfModel::StandardSurface(StandardSurface::new(&p)))
+}
+
+/// `specular_roughness` giving GGX roughness `alpha` (α = roughness²).
+fn rough_for(alpha: f32) -> f32 {
+    alpha.sqrt()
+}
+
+/// Named parameter sets exercising every lobe and combination.
+fn std_surface_sets() -> Vec<(String, Bsdf)> {
+    let mut v = Vec::new();
+    v.push((
+        "pure diffuse".to_string(),
+        std_surface(|p| {
+            p.specular = 0.0;
+            p.base_color = Spectrum::new(0.7, 0.5, 0.3);
+        }),
+    ));
+    for alpha in [0.05f32, 0.5] {
+        v.push((
+            format!("metal α={alpha}"),
+            std_surface(|p| {
+                p.metalness = 1.0;
+                p.base = 1.0;
+                p.base_color = Spectrum::new(0.95, 0.64, 0.54);
+                p.specular_color = Spectrum::new(1.0, 0.9, 0.8);
+                p.specular_roughness = rough_for(alpha);
+            }),
+        ));
+        v.push((
+            format!("plastic α={alpha}"),
+            std_surface(|p| {
+                p.base = 1.0;
+                p.base_color = Spectrum::new(0.8, 0.1, 0.1);
+                p.specular_roughness = rough_for(alpha);
+            }),
+        ));
+        v.push((
+            format!("glass α={alpha}"),
+            std_surface(|p| {
+                p.transmission = 1.0;
+                p.specular_roughness = rough_for(alpha);
+            }),
+        ));
+    }
+    v.push((
+        "50/50 mix".to_string(),
+        std_surface(|p| {
+            p.metalness = 0.5;
+            p.transmission = 0.5;
+            p.base = 1.0;
+            p.base_color = Spectrum::new(0.2, 0.6, 0.9);
+            p.specular_color = Spectrum::new(0.9, 1.0, 0.8);
+            p.transmission_color = Spectrum::new(1.0, 0.7, 0.7);
+            p.specular_roughness = rough_for(0.25);
+            p.specular_ior = 1.33;
+        }),
+    ));
+    v.push((
+        "half-specular glass".to_string(),
+        std_surface(|p| {
+            p.transmission = 1.0;
+            p.specular = 0.5;
+            p.specular_roughness = rough_for(0.2);
+            p.specular_ior = 1.7;
+        }),
+    ));
+    v
+}
+
+/// χ² configurations of the standard surface, counted in the Bonferroni family with the others.
+const STD_CHI2_TESTS: usize = 2 + 4 + 6 + 6 + 3 + 2;
+
+/// As `run_chi2`, with the significance level divided by `family` tests.
+fn run_chi2_family(cases: &[(String, Bsdf, Vec3)], family: usize, seed: u64) {
+    let threshold = 0.01 / family as f64;
+    let mut failures = Vec::new();
+    for (i, (name, bsdf, wi)) in cases.iter().enumerate() {
+        let r = chi2_test(bsdf, *wi, seed + i as u64);
+        println!(
+            "χ² {name}: p = {:.4}, χ² = {:.1}, dof = {}, none {} (expected {:.1})",
+            r.p, r.chi2, r.dof, r.none_observed, r.none_expected
+        );
+        if r.p.is_nan() || r.p <= threshold {
+            failures.push(format!("{name}: p = {:.3e} (χ² {:.1}, dof {})", r.p, r.chi2, r.dof));
+        }
+    }
+    assert!(failures.is_empty(), "χ² failures (threshold {threshold:.1e}):\n{}", failures.join("\n"));
+}
+
+#[test]
+fn bsdf_chi2_standard_surface() {
+    use std::f32::consts::PI;
+    let sets = std_surface_sets();
+    let get = |name: &str| sets.iter().find(|(n, _)| n == name).unwrap().1;
+    let mut cases = Vec::new();
+    let mut add = |name: &str, thetas: &[f32]| {
+        for &theta in thetas {
+            cases.push((format!("standard_surface {name} θ={theta}"), get(name), dir(theta, 0.7)));
+        }
+    };
+    add("pure diffuse", &[0.3, 1.3]);
+    add("metal α=0.05", &[0.2, 1.2]);
+    add("metal α=0.5", &[0.2, 1.2]);
+    add("plastic α=0.05", &[0.0, 0.8, 1.45]);
+    add("plastic α=0.5", &[0.0, 0.8, 1.45]);
+    // Outside; inside below and beyond the critical angle (41.8°).
+    add("glass α=0.05", &[0.5, PI - 0.4, PI - 1.0]);
+    add("glass α=0.5", &[0.5, PI - 0.4, PI - 1.0]);
+    add("50/50 mix", &[0.4, 1.3, PI - 0.6]);
+    add("half-specular glass", &[0.9, PI - 0.9]);
+    assert_eq!(cases.len(), STD_CHI2_TESTS);
+    run_chi2_family(&cases, CHI2_TESTS + STD_CHI2_TESTS, 5000);
+}
+
+#[test]
+fn bsdf_standard_surface_sample_matches_eval_and_pdf() {
+    let mut rng = Rng::new(78, 3);
+    for (name, bsdf) in std_surface_sets() {
+        let BsdfModel::StandardSurface(ss) = bsdf.model else { unreachable!() };
+        let eta = ss.params().specular_ior;
+        let want_alpha = beckmann_equivalent_alpha(MicrofacetKind::Ggx, ss.distribution().alpha_u);
+        let (mut n, mut loose, mut kinds) = (0usize, 0usize, [0usize; 2]);
+        for _ in 0..20_000 {
+            let wi = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+            let Some(s) = bsdf.sample(wi, rng.next_f32(), rng.next_2d()) else { continue };
+            n += 1;
+            assert!((s.wo.length() - 1.0).abs() < 1e-4, "{name}: |wo| = {}", s.wo.length());
+            assert_eq!(s.transmitted, s.wo.z * wi.z < 0.0, "{name}: transmitted flag");
+            assert!(s.pdf > 0.0 && s.pdf.is_finite() && s.weight.is_finite() && s.weight.min_element() >= 0.0);
+            let (f, pdf) = bsdf.eval_pdf(wi, s.wo);
+            assert_eq!(f, bsdf.eval(wi, s.wo));
+            assert_eq!(pdf, bsdf.pdf(wi, s.wo));
+            let rel = |a: f32, b: f32| (a - b).abs() / a.abs().max(b.abs()).max(1e-30);
+            let e_pdf = rel(s.pdf, pdf);
+            let expect = f / pdf;
+            let e_w = (0..3).map(|c| rel(s.weight[c], expect[c])).fold(0.0f32, f32::max);
+            if e_pdf > 1e-3 || e_w > 1e-3 {
+                loose += 1;
+            }
+            assert!(
+                e_pdf < 2e-2 && e_w < 2e-2,
+                "{name}: wi {wi} wo {}: pdf {} vs {pdf}, weight {} vs {expect}",
+                s.wo,
+                s.pdf,
+                s.weight
+            );
+            let want_eta = match (s.transmitted, wi.z > 0.0) {
+                (false, _) => 1.0,
+                (true, true) => eta,
+                (true, false) => 1.0 / eta,
+            };
+            assert!((s.eta - want_eta).abs() < 1e-6, "{name}: eta {}", s.eta);
+            match s.kind {
+                LobeKind::Diffuse => {
+                    kinds[0] += 1;
+                    assert_eq!(s.alpha, 1.0);
+                    assert!(wi.z > 0.0 && s.wo.z > 0.0);
+                }
+                LobeKind::Glossy => {
+                    kinds[1] += 1;
+                    assert_eq!(s.alpha, want_alpha);
+                }
+                LobeKind::Specular => panic!("{name}: no delta lobes"),
+            }
+        }
+        println!("{name}: {n} samples, {} diffuse, {} glossy, {loose} loose", kinds[0], kinds[1]);
+        assert!(n > 2000, "{name}: only {n} samples");
+        assert!(loose * 1000 <= n, "{name}: {loose} of {n} samples off by more than 1e-3");
+        if name.contains("plastic") || name.contains("mix") {
+            assert!(kinds[0] > 0 && kinds[1] > 0, "{name}: both strategies must be used");
+        }
+    }
+}
+
+#[test]
+fn bsdf_standard_surface_pure_diffuse_is_lambert() {
+    let rho = Spectrum::new(0.7, 0.5, 0.3);
+    let b = std_surface(|p| {
+        p.specular = 0.0;
+        p.base = 1.0;
+        p.base_color = rho;
+        p.specular_roughness = 0.4;
+    });
+    let lambert = Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: rho }));
+    let mut rng = Rng::new(12, 1);
+    for _ in 0..5000 {
+        let wi = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+        let wo = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+        let (f, p) = b.eval_pdf(wi, wo);
+        let (fl, pl) = lambert.eval_pdf(wi, wo);
+        assert!((f - fl).abs().max_element() <= 1e-6 * fl.max_element(), "{f} vs Lambert {fl}");
+        assert!((p - pl).abs() <= 1e-6 * pl, "pdf {p} vs {pl}");
+        let (ul, u) = (rng.next_f32(), rng.next_2d());
+        match (b.sample(wi, ul, u), lambert.sample(wi, ul, u)) {
+            (Some(s), Some(t)) => {
+                assert_eq!(s.wo, t.wo);
+                assert!((s.weight - rho).abs().max_element() < 1e-5, "weight {}", s.weight);
+                assert_eq!((s.kind, s.alpha, s.transmitted), (LobeKind::Diffuse, 1.0, false));
+            }
+            (None, None) => {}
+            (a, c) => panic!("sample mismatch {a:?} vs {c:?}"),
+        }
+    }
+}
+
+/// Energy of a sample: its weight (channel 0) with the radiance scaling of refraction undone.
+fn std_energy(eta: f32, wi: Vec3) -> impl Fn(&BsdfSample) -> f64 {
+    let eta_ti2 = if wi.z > 0.0 { 1.0 / (eta * eta) } else { eta * eta } as f64;
+    move |s: &BsdfSample| s.weight.x as f64 / if s.transmitted { eta_ti2 } else { 1.0 }
+}
+
+#[test]
+fn bsdf_furnace_standard_surface() {
+    use std::f32::consts::PI;
+    let eta = 1.5f32;
+    for metalness in [0.0f32, 1.0] {
+        for transmission in [0.0f32, 1.0] {
+            for alpha in [0.04f32, 0.25, 0.64] {
+                let b = std_surface(|p| {
+                    p.base = 1.0;
+                    p.metalness = metalness;
+                    p.transmission = transmission;
+                    p.specular_roughness = rough_for(alpha);
+                    p.specular_ior = eta;
+                });
+                let mut thetas = vec![0.0f32, 0.7, 1.3];
+                if transmission > 0.0 {
+                    thetas.extend([PI - 0.3, PI - 1.0]);
+                }
+                for theta in thetas {
+                    let wi = dir(theta, -0.4);
+                    let name = format!("m={metalness} t={transmission} α={alpha} θ={theta}");
+                    let (m, se) = mean_weight(&b, wi, 100_000, 7, std_energy(eta, wi));
+                    println!("furnace {name}: {m:.5} ± {se:.5}");
+                    assert!(m <= 1.0 + 3.0 * se + 1e-3, "{name}: energy {m} ± {se} > 1");
+                    // The opaque dielectric: specular + albedo-scaled diffuse = 1 up to the table's
+                    // error (and the diffuse lobe is white).
+                    if metalness == 0.0 && transmission == 0.0 {
+                        assert!((m - 1.0).abs() < 3.0 * se + 4e-3, "{name}: energy {m} ± {se}, want 1");
+                    }
+                    // Independent estimate: quadrature of eval.
+                    if alpha >= 0.25 && theta < 1.0 {
+                        let eta_ti2 = if wi.z > 0.0 { 1.0 / (eta * eta) } else { eta * eta } as f64;
+                        let q = sphere_integral(
+                            &|wo| {
+                                let v = b.eval(wi, wo).x as f64;
+                                if wo.z * wi.z < 0.0 {
+                                    v / eta_ti2
+                                } else {
+                                    v
+                                }
+                            },
+                            -1.0,
+                            1.0,
+                        );
+                        assert!((q - m).abs() < 4.0 * se + 3e-3, "{name}: ∫eval {q} vs E[weight] {m} ± {se}");
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn bsdf_standard_surface_metal_matches_conductor() {
+    // base·base_color = 1 and a white edge: Gulbrandsen's IOR reflects 0.99 at normal incidence
+    // (the reflectivity is clamped there) and more toward grazing, so the albedo is within ~1 %
+    // of the perfect GGX mirror's (masking loss only), and never above it.
+    for alpha in [0.04f32, 0.25, 0.64] {
+        let b = std_surface(|p| {
+            p.base = 1.0;
+            p.metalness = 1.0;
+            p.specular_roughness = rough_for(alpha);
+        });
+        let c = rough_conductor(MicrofacetKind::Ggx, alpha, alpha, "none");
+        for theta in [0.0f32, 0.8, 1.3] {
+            let wi = dir(theta, 0.5);
+            let (m, se) = mean_weight(&b, wi, 50_000, 3, |s| s.weight.x as f64);
+            let (mc, _) = mean_weight(&c, wi, 50_000, 3, |s| s.weight.x as f64);
+            println!("metal α={alpha} θ={theta}: {m:.5} ± {se:.5} vs conductor {mc:.5}");
+            // Same random numbers and the same visible-normal sampling: the estimates differ by
+            // the Fresnel factor alone.
+            assert!(m <= mc + 1e-6 && m > mc - 0.012, "α={alpha} θ={theta}: {m} vs conductor {mc}");
+        }
+    }
+}
+
+#[test]
+fn bsdf_standard_surface_glass_is_rough_dielectric() {
+    // transmission 1, specular 1, white tints: exactly GGX roughdielectric.
+    for (alpha, eta) in [(0.05f32, 1.5f32), (0.3, 1.33), (0.7, 2.0)] {
+        let b = std_surface(|p| {
+            p.transmission = 1.0;
+            p.specular_roughness = rough_for(alpha);
+            p.specular_ior = eta;
+        });
+        let BsdfModel::StandardSurface(ss) = b.model else { unreachable!() };
+        let a = ss.distribution().alpha_u;
+        let d = rough_dielectric(MicrofacetKind::Ggx, a, a, eta);
+        let mut rng = Rng::new(4, 4);
+        let mut nonzero = 0;
+        for _ in 0..20_000 {
+            let wi = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+            let wo = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+            let (f, p) = b.eval_pdf(wi, wo);
+            let (fd, pd) = d.eval_pdf(wi, wo);
+            if pd > 0.0 {
+                nonzero += 1;
+            }
+            assert!((f - fd).abs().max_element() <= 1e-4 * fd.max_element() + 1e-12, "{f} vs {fd}");
+            assert!((p - pd).abs() <= 1e-4 * pd + 1e-12, "pdf {p} vs {pd}");
+        }
+        assert!(nonzero > 5000);
+    }
+}
+
+#[test]
+fn bsdf_reciprocity_standard_surface() {
+    // With the symmetric albedo scaling (1 − sE(θ_i))(1 − sE(θ_o))/(1 − sE_avg), the whole
+    // reflection part is reciprocal — metal, dielectric specular and diffuse together, outside;
+    // inside (transmission > 0) the dielectric reflection. Refraction obeys
+    // f(wo, wi) = η² f(wi, wo) for wi outside. (A plain (1 − F(θ_i)) diffuse attenuation would
+    // not be reciprocal; this model does not use one.)
+    let mut rng = Rng::new(6, 9);
+    let hemi = |rng: &mut Rng| {
+        let mut v = crate::sampling::square_to_uniform_sphere(rng.next_2d());
+        v.z = v.z.abs();
+        v
+    };
+    for (name, b) in std_surface_sets() {
+        let BsdfModel::StandardSurface(ss) = b.model else { unreachable!() };
+        let has_t = ss.params().transmission > 0.0;
+        let eta = ss.params().specular_ior;
+        let mut checked = 0;
+        for _ in 0..5000 {
+            let (mut wi, mut wo) = (hemi(&mut rng), hemi(&mut rng));
+            if has_t && rng.next_f32() < 0.5 {
+                wi.z = -wi.z;
+                wo.z = -wo.z;
+            }
+            let a = b.eval(wi, wo) / wo.z.abs();
+            let c = b.eval(wo, wi) / wi.z.abs();
+            let scale = a.max_element().max(c.max_element());
+            if scale > 0.0 {
+                checked += 1;
+            }
+            assert!((a - c).abs().max_element() <= 1e-3 * scale + 1e-5, "{name}: f(wi,wo) {a} vs f(wo,wi) {c}");
+        }
+        assert!(checked > 1000, "{name}: {checked}");
+        if has_t {
+            let mut checked = 0;
+            for _ in 0..5000 {
+                let wi = hemi(&mut rng);
+                let mut wo = hemi(&mut rng);
+                wo.z = -wo.z;
+                let a = b.eval(wi, wo) / wo.z.abs();
+                let c = b.eval(wo, wi) / wi.z.abs();
+                if a.max_element() > 0.0 {
+                    checked += 1;
+                }
+                let want = a * (eta * eta);
+                assert!(
+                    (c - want).abs().max_element() <= 1e-3 * c.max_element().max(want.max_element()) + 1e-4,
+                    "{name}: f(wo,wi) {c} vs η² f(wi,wo) {want}"
+                );
+            }
+            assert!(checked > 500, "{name}: {checked}");
+        }
+    }
+}
+
+#[test]
+fn bsdf_standard_surface_one_sided_and_back() {
+    // Opaque: black from below, like roughconductor.
+    let b = std_surface(|p| p.metalness = 0.3);
+    let below = dir(2.0, 0.3);
+    assert!(b.sample(below, 0.5, Vec2::splat(0.5)).is_none());
+    assert_eq!(b.eval_pdf(below, dir(0.5, 0.0)), (Spectrum::ZERO, 0.0));
+    assert_eq!(b.eval_pdf(below, dir(2.5, 0.0)), (Spectrum::ZERO, 0.0));
+    // No transmission when opaque.
+    assert_eq!(b.eval(dir(0.5, 0.0), dir(2.5, 1.0)), Spectrum::ZERO);
+    // Two-sided via the adapter.
+    assert!(b.two_sided().sample(below, 0.5, Vec2::splat(0.5)).is_some());
+    // With transmission, from inside: only reflection and refraction — no diffuse, no metal.
+    let t = std_surface(|p| {
+        p.transmission = 0.5;
+        p.metalness = 0.5;
+        p.specular_roughness = 0.5;
+    });
+    let mut rng = Rng::new(2, 2);
+    for _ in 0..2000 {
+        if let Some(s) = t.sample(dir(2.6, 0.2), rng.next_f32(), rng.next_2d()) {
+            assert_eq!(s.kind, LobeKind::Glossy);
+        }
+    }
+    assert!(b.has_smooth() && t.has_smooth());
+}
+
+#[test]
+fn bsdf_standard_surface_desc() {
+    let c = |v: f32| Texture::Constant(Spectrum::splat(v));
+    let desc = BsdfDesc::StandardSurface {
+        base: c(0.5),
+        base_color: Texture::Constant(Spectrum::new(0.2, 0.4, 0.6)),
+        metalness: c(0.25),
+        specular: c(0.75),
+        specular_color: c(0.9),
+        specular_roughness: c(0.3),
+        specular_ior: c(1.6),
+        transmission: c(0.1),
+        transmission_color: c(0.8),
+    };
+    assert!(desc.has_smooth());
+    let b = desc.at(&ShadeContext::uv(Vec2::ZERO));
+    assert!(b.has_smooth() && !b.two_sided);
+    let BsdfModel::StandardSurface(ss) = b.model else { panic!("wrong model") };
+    let p = ss.params();
+    assert_eq!((p.base, p.metalness, p.specular, p.specular_roughness), (0.5, 0.25, 0.75, 0.3));
+    assert_eq!((p.specular_ior, p.transmission), (1.6, 0.1));
+    assert_eq!(p.base_color, Spectrum::new(0.2, 0.4, 0.6));
+    assert_eq!((p.specular_color, p.transmission_color), (Spectrum::splat(0.9), Spectrum::splat(0.8)));
+    assert!((ss.distribution().alpha_u - 0.09).abs() < 1e-7 && ss.distribution().kind == MicrofacetKind::Ggx);
+    // α clamped like the other BSDFs; inputs clamped to their ranges.
+    let z = std_surface(|p| {
+        p.specular_roughness = 0.0;
+        p.metalness = 7.0;
+        p.specular_ior = f32::NAN;
+        p.base_color = Spectrum::new(-1.0, f32::NAN, 2.0);
+    });
+    let BsdfModel::StandardSurface(z) = z.model else { unreachable!() };
+    assert_eq!(z.distribution().alpha_u, microfacet::MIN_ALPHA);
+    assert_eq!((z.params().metalness, z.params().specular_ior), (1.0, 1.5));
+    assert_eq!(z.params().base_color, Spectrum::new(0.0, 0.0, 1.0));
+}
+
+#[test]
+fn bsdf_standard_surface_never_returns_nan() {
+    let mut all: Vec<Bsdf> = std_surface_sets().into_iter().map(|(_, b)| b).collect();
+    for r in [0.0f32, 0.01, 1.0] {
+        for eta in [0.25f32, 0.9, 1.0, 1.0001, 4.0] {
+            for (m, s, t) in
+                [(0.0f32, 1.0f32, 0.0f32), (0.0, 0.0, 1.0), (1.0, 1.0, 0.0), (0.5, 0.5, 0.5), (0.0, 1.0, 1.0)]
+            {
+                all.push(std_surface(|p| {
+                    p.specular_roughness = r;
+                    p.specular_ior = eta;
+                    p.metalness = m;
+                    p.specular = s;
+                    p.transmission = t;
+                    p.base = 1.0;
+                }));
+            }
+        }
+    }
+    // Black everything.
+    all.push(std_surface(|p| {
+        p.base = 0.0;
+        p.specular = 0.0;
+        p.transmission = 0.0;
+    }));
+    all.push(std_surface(|p| {
+        p.base = 0.0;
+        p.metalness = 1.0;
+        p.specular = 0.0;
+    }));
+    let special = [
+        Vec3::Z,
+        -Vec3::Z,
+        Vec3::X,
+        -Vec3::Y,
+        Vec3::new(1.0, 0.0, 1e-7).normalize(),
+        Vec3::new(0.0, 1.0, -1e-7).normalize(),
+        Vec3::new(0.6, 0.8, 0.0),
+        Vec3::new(1e-7, 0.0, 1.0).normalize(),
+    ];
+    let us = [0.0f32, 1e-7, 0.5, 0.999_999_9];
+    let mut rng = Rng::new(8, 9);
+    for b in &all {
+        let mut dirs: Vec<Vec3> = special.to_vec();
+        for _ in 0..60 {
+            dirs.push(crate::sampling::square_to_uniform_sphere(rng.next_2d()));
+        }
+        for &wi in &dirs {
+            for &wo in &dirs {
+                let (f, p) = b.eval_pdf(wi, wo);
+                assert!(
+                    f.is_finite() && f.min_element() >= 0.0 && p.is_finite() && p >= 0.0,
+                    "{b:?} {wi} {wo}: {f} {p}"
+                );
+            }
+            for &u0 in &us {
+                for &u1 in &us {
+                    for &ul in &[0.0f32, 0.3, 0.999_999_9] {
+                        if let Some(s) = b.sample(wi, ul, Vec2::new(u0, u1)) {
+                            assert!(
+                                s.wo.is_finite() && (s.wo.length() - 1.0).abs() < 1e-3,
+                                "{b:?} wi {wi}: wo {}",
+                                s.wo
+                            );
+                            assert!(
+                                s.weight.is_finite() && s.weight.min_element() >= 0.0,
+                                "{b:?}: weight {}",
+                                s.weight
+                            );
+                            assert!(s.pdf.is_finite() && s.pdf > 0.0, "{b:?} wi {wi}: pdf {}", s.pdf);
+                            assert!(s.eta.is_finite() && s.alpha.is_finite());
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
