@@ -81,6 +81,49 @@ pub struct RenderSettings {
     /// Replace every graph output by its mean over the texture: the free-texture lower bound
     /// on render time.
     pub free_textures: bool,
+    /// Scale of the texture filter relative to the footprint (see [`FilterScale`]).
+    pub filter_scale: FilterScale,
+}
+
+/// How wide textures are filtered relative to the path footprint.
+///
+/// Filtering each sample over the whole footprint (σ = ½ px at the first hit, the paper's pixel
+/// filter) blurs on top of the pixel filter that the samples already integrate, so the image
+/// converges to a slightly blurrier one than point sampling would. `Auto` narrows the texture
+/// filter as samples accumulate, as pbrt-v4 does with its ray differentials: scale
+/// `max(1/8, 1/√spp)`, so few samples get strong anti-aliasing and many converge to the
+/// point-sampled image. Footprints themselves (AOVs, `tessera footprint`) are never scaled.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FilterScale {
+    /// A fixed scale of the footprint's standard deviation (1 = the paper's footprint).
+    Fixed(f32),
+    /// `max(1/8, 1/√spp)`.
+    Auto,
+}
+
+impl std::str::FromStr for FilterScale {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(FilterScale::Auto);
+        }
+        match s.parse::<f32>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => Ok(FilterScale::Fixed(v)),
+            _ => Err(format!("filter scale must be 'auto' or a non-negative number, got '{s}'")),
+        }
+    }
+}
+
+impl RenderSettings {
+    /// The factor applied to uv covariances before textures are filtered.
+    #[inline]
+    pub fn filter_scale_squared(&self) -> f32 {
+        let s = match self.filter_scale {
+            FilterScale::Fixed(s) => s,
+            FilterScale::Auto => (1.0 / (self.spp.max(1) as f32).sqrt()).max(0.125),
+        };
+        s * s
+    }
 }
 
 impl RenderSettings {
@@ -92,6 +135,7 @@ impl RenderSettings {
             footprint: FootprintMode::default(),
             footprint_aov_density: None,
             free_textures: false,
+            filter_scale: FilterScale::Fixed(1.0),
         }
     }
 }
@@ -387,7 +431,7 @@ pub fn radiance<O: PathObserver>(
         } else {
             // Procedural textures are filtered to the vertex's uv footprint (a point without one).
             let cov = match &vertex {
-                Some(v) => footprint::uv_covariance(var, v).as_mat2(),
+                Some(v) => footprint::uv_covariance(var, v).as_mat2() * settings_r.filter_scale_squared(),
                 None => Mat2::ZERO,
             };
             shade.evaluate(&scene.graphs, material, &graph::Footprint::new(si.uv, cov))

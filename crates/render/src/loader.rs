@@ -35,8 +35,22 @@ pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
 
 /// Loads a scene from text; relative file names resolve against `base_dir`.
 pub fn load_str(text: &str, virtual_path: &Path, base_dir: &Path, defines: &[(String, String)]) -> Result<Scene> {
+    load_str_with_files(text, virtual_path, base_dir, defines, &[])
+}
+
+/// [`load_str`] with some files supplied in memory, by the name the scene uses (for scenes
+/// embedded in a binary together with their MaterialX documents).
+pub fn load_str_with_files(
+    text: &str,
+    virtual_path: &Path,
+    base_dir: &Path,
+    defines: &[(String, String)],
+    files: &[(&str, &str)],
+) -> Result<Scene> {
     let root = xml::parse_str(text, virtual_path, defines)?;
-    Builder::new(base_dir.to_path_buf()).build(&root)
+    let mut b = Builder::new(base_dir.to_path_buf());
+    b.embedded = files.iter().map(|(n, t)| (n.to_string(), t.to_string())).collect();
+    b.build(&root)
 }
 
 struct Builder {
@@ -49,6 +63,8 @@ struct Builder {
     /// Graph outputs requested by the textures of the material being built: (graph, output,
     /// scalar); a texture's slot is its index here.
     pending_outputs: Vec<(u32, graph::OutputId)>,
+    /// Files supplied in memory, by the name the scene refers to them with.
+    embedded: HashMap<String, String>,
     /// Materials already built, keyed by the address of their XML object (shared `<ref>`s).
     material_ids: HashMap<*const Object, u32>,
     emitters: Vec<Emitter>,
@@ -90,6 +106,7 @@ impl Builder {
             graphs: Vec::new(),
             documents: HashMap::new(),
             pending_outputs: Vec::new(),
+            embedded: HashMap::new(),
             material_ids: HashMap::new(),
             emitters: Vec::new(),
             bitmaps: HashMap::new(),
@@ -714,11 +731,14 @@ impl Builder {
         if let Some(d) = self.documents.get(&path) {
             return Ok(d.clone());
         }
-        if !path.is_file() {
+        let doc = if let Some(text) = self.embedded.get(file) {
+            graph::Document::parse(text, Path::new(file), &graph::LoadOptions::default())
+        } else if !path.is_file() {
             return Err(obj.error_at("filename", format!("MaterialX document '{}' not found", path.display())));
+        } else {
+            graph::Document::load(&path)
         }
-        let doc = graph::Document::load(&path)
-            .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
+        .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
         let doc = Arc::new(doc);
         let index = self.graphs.len() as u32;
         self.graphs.push(SceneGraph { name: path.display().to_string(), document: doc.clone() });

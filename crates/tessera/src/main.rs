@@ -15,8 +15,11 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// The demo scene built into the binary, rendered when no scene is given.
-const DEFAULT_SCENE: &str = include_str!("../../../scenes/default.xml");
+/// The demo scene built into the binary, rendered when no scene is given: marble spheres, a
+/// mirror and a glass ball on a marble-tile floor (procedural MaterialX graphs).
+const DEFAULT_SCENE: &str = include_str!("../../../scenes/marble.xml");
+/// The MaterialX document the default scene uses.
+const DEFAULT_SCENE_MTLX: &str = include_str!("../../../scenes/marble.mtlx");
 
 #[derive(Parser, Debug)]
 #[command(name = "tessera", version, about = "A path tracer with filtered procedural textures")]
@@ -65,6 +68,10 @@ struct RenderArgs {
     /// R, G, B) and <out>.footprint.png (a heat map).
     #[arg(long, value_parser = ["footprint"])]
     aov: Vec<String>,
+    /// Width of procedural texture filtering relative to the footprint: a number (1 = the
+    /// footprint, 0 = point sampling) or `auto` (narrower as spp grows: max(1/8, 1/sqrt(spp))).
+    #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<render::integrator::FilterScale>())]
+    filter_scale: render::integrator::FilterScale,
     /// Replace every procedural texture by its mean value: the free-texture lower bound on
     /// render time (for benchmarks).
     #[arg(long)]
@@ -155,6 +162,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         footprint: args.footprint,
         footprint_aov_density: want_aov.then_some(args.aov_density),
         free_textures: args.free_textures,
+        filter_scale: args.filter_scale,
         ..RenderSettings::new(spp, seed)
     };
     let out = pool.install(|| render(&scene, settings, &|n| bar.inc(n)));
@@ -261,9 +269,13 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
 pub(crate) fn load_scene(path: Option<&Path>, defines: &[(String, String)]) -> Result<Scene> {
     Ok(match path {
         Some(path) => render::loader::load_file(path, defines)?,
-        None => {
-            render::loader::load_str(DEFAULT_SCENE, Path::new("<embedded default scene>"), Path::new("."), defines)?
-        }
+        None => render::loader::load_str_with_files(
+            DEFAULT_SCENE,
+            Path::new("<embedded default scene>"),
+            Path::new("."),
+            defines,
+            &[("marble.mtlx", DEFAULT_SCENE_MTLX)],
+        )?,
     })
 }
 
