@@ -190,6 +190,16 @@ impl PathObserver for NoObserver {}
 
 /// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
 pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
+    render_cached(scene, settings, None, progress)
+}
+
+/// [`render`] with graph nodes read through `cache` (see [`crate::caching`]).
+pub fn render_cached(
+    scene: &Scene,
+    settings: RenderSettings,
+    cache: Option<&crate::caching::NodeCache>,
+    progress: &(dyn Fn(u64) + Sync),
+) -> RenderOutput {
     let start = Instant::now();
     let (w, h) = (scene.camera.width, scene.camera.height);
     let tiles_x = w.div_ceil(TILE);
@@ -201,7 +211,7 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
             let (x0, y0) = (tx * TILE, ty * TILE);
             let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
             let mut counts = RenderCounts::default();
-            let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
+            let mut shade = ShadeScratch::with_cache(&scene.graphs, &scene.materials, cache);
             let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
             for y in y0..y1 {
                 for x in x0..x1 {
@@ -237,17 +247,7 @@ pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) +
 fn merge_graph_stats(into: &mut Vec<graph::EvalStats>, from: &[graph::EvalStats]) {
     into.resize(from.len().max(into.len()), graph::EvalStats::default());
     for (a, b) in into.iter_mut().zip(from) {
-        if a.evaluations.len() < b.evaluations.len() {
-            a.evaluations.resize(b.evaluations.len(), 0);
-            a.lookups.resize(b.lookups.len(), 0);
-        }
-        for (x, y) in a.evaluations.iter_mut().zip(&b.evaluations) {
-            *x += y;
-        }
-        for (x, y) in a.lookups.iter_mut().zip(&b.lookups) {
-            *x += y;
-        }
-        a.work.merge(&b.work);
+        crate::caching::merge_eval_stats(a, b);
     }
 }
 

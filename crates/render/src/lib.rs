@@ -10,6 +10,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 pub mod bsdf;
+pub mod caching;
 pub mod camera;
 pub mod emitter;
 pub mod error;

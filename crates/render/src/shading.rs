@@ -79,14 +79,28 @@ impl Material {
     }
 }
 
-/// Per-thread graph evaluation memory and statistics (allocated once per thread or tile).
-pub struct ShadeScratch {
+/// Per-thread graph evaluation memory and statistics (allocated once per thread or tile), and
+/// the thread's access to the node cache when one is used.
+pub struct ShadeScratch<'a> {
     scratches: Vec<EvalScratch>,
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
+    cache: Option<crate::caching::CacheAccess<'a>>,
 }
 
-impl ShadeScratch {
+impl<'a> ShadeScratch<'a> {
+    /// Scratch for every graph of a scene and the largest material, reading cached nodes from
+    /// `cache` when given.
+    pub fn with_cache(
+        graphs: &'a [SceneGraph],
+        materials: &[Material],
+        cache: Option<&'a crate::caching::NodeCache>,
+    ) -> Self {
+        let mut s = Self::new(graphs, materials);
+        s.cache = cache.map(|c| crate::caching::CacheAccess::new(c, graphs));
+        s
+    }
+
     /// Scratch for every graph of a scene and the largest material.
     pub fn new(graphs: &[SceneGraph], materials: &[Material]) -> Self {
         let slots = materials.iter().map(|m| m.slot_count as usize).max().unwrap_or(0);
@@ -96,6 +110,7 @@ impl ShadeScratch {
             scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
+            cache: None,
         }
     }
 
@@ -105,7 +120,11 @@ impl ShadeScratch {
         for mg in &material.graphs {
             let g = graphs[mg.graph as usize].graph();
             let n = mg.slots.len();
-            g.eval(&mg.plan, fp, &mut self.scratches[mg.graph as usize], &NoOverride, &mut self.tmp[..n]);
+            let scratch = &mut self.scratches[mg.graph as usize];
+            match &self.cache {
+                Some(access) => g.eval(&mg.plan, fp, scratch, &access.for_graph(mg.graph), &mut self.tmp[..n]),
+                None => g.eval(&mg.plan, fp, scratch, &NoOverride, &mut self.tmp[..n]),
+            }
             for (k, &slot) in mg.slots.iter().enumerate() {
                 self.outputs[slot as usize] = self.tmp[k];
             }
@@ -118,6 +137,11 @@ impl ShadeScratch {
         stats.resize(self.scratches.len(), EvalStats::default());
         for (s, out) in self.scratches.iter().zip(stats.iter_mut()) {
             s.merge_stats_into(out);
+        }
+        if let Some(access) = &self.cache {
+            for (fill, out) in access.fill_stats.borrow().iter().zip(stats.iter_mut()) {
+                crate::caching::merge_eval_stats(out, fill);
+            }
         }
     }
 }

@@ -7,7 +7,8 @@ mod heatmap;
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use render::integrator::{render, RenderSettings, AOV_NO_VERTEX};
+use render::caching::{NodeCache, Strategy};
+use render::integrator::{render_cached, RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
 use serde_json::json;
@@ -72,6 +73,13 @@ struct RenderArgs {
     /// footprint, 0 = point sampling) or `auto` (narrower as spp grows: max(1/8, 1/sqrt(spp))).
     #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<render::integrator::FilterScale>())]
     filter_scale: render::integrator::FilterScale,
+    /// Which procedural graph nodes are cached as mip-mapped tiles: none, outputs, all, or
+    /// nodes:a,b,c (node names, nodegraph/node).
+    #[arg(long, default_value = "none", value_parser = |s: &str| s.parse::<Strategy>())]
+    strategy: Strategy,
+    /// Memory budget of the tile cache in MiB (never exceeded).
+    #[arg(long, default_value_t = 512.0)]
+    budget_mb: f64,
     /// Replace every procedural texture by its mean value: the free-texture lower bound on
     /// render time (for benchmarks).
     #[arg(long)]
@@ -165,7 +173,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
         filter_scale: args.filter_scale,
         ..RenderSettings::new(spp, seed)
     };
-    let out = pool.install(|| render(&scene, settings, &|n| bar.inc(n)));
+    if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
+        bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", args.budget_mb);
+    }
+    let node_cache =
+        NodeCache::new(&scene.graphs, &scene.materials, &args.strategy, (args.budget_mb * 1048576.0) as usize)?;
+    let out = pool.install(|| render_cached(&scene, settings, node_cache.as_ref(), &|n| bar.inc(n)));
     bar.finish_and_clear();
 
     let t_write = Instant::now();
@@ -202,6 +215,22 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 scene.graphs.len()
             );
         }
+        if let Some(nc) = &node_cache {
+            let st = nc.stats();
+            let t = st.total();
+            eprintln!(
+                "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
+                nc.cached_nodes(),
+                st.textures.iter().map(|x| x.lookups).sum::<u64>(),
+                t.hits,
+                t.misses,
+                t.fills,
+                t.texels_filled,
+                t.evictions,
+                st.peak_bytes as f64 / 1048576.0,
+                st.budget_bytes as f64 / 1048576.0
+            );
+        }
         if c.nonfinite_samples > 0 {
             eprintln!("warning: {} samples had NaN or infinite radiance and were discarded", c.nonfinite_samples);
         }
@@ -230,6 +259,23 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 "rays_per_s": total_rays as f64 / render_s,
             },
             "graphs": graph_stats_json(&scene, &out.graph_stats),
+            "cache": node_cache.as_ref().map(|nc| {
+                let st = nc.stats();
+                let t = st.total();
+                json!({
+                    "strategy": format!("{:?}", args.strategy).to_lowercase(),
+                    "cached_nodes": nc.cached_node_names(&scene.graphs),
+                    "budget_bytes": st.budget_bytes,
+                    "peak_bytes": st.peak_bytes,
+                    "lookups": st.textures.iter().map(|x| x.lookups).sum::<u64>(),
+                    "tile_hits": t.hits,
+                    "tile_misses": t.misses,
+                    "tiles_filled": t.fills,
+                    "texels_filled": t.texels_filled,
+                    "evictions": t.evictions,
+                    "refills": t.refills,
+                })
+            }),
         });
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }

@@ -1,0 +1,276 @@
+//! Caching of graph nodes as virtual mip-mapped textures (the `cache` crate), and the
+//! strategies that choose which nodes are cached.
+//!
+//! A cached node's downstream consumers read it through filtered tile lookups; a tile is filled
+//! on demand by evaluating the node at each texel centre with a one-texel footprint, its own
+//! inputs read through their strategy (cached or evaluated). Tiles are pure functions of
+//! (node, level, tile), so images do not depend on threads or on what was evicted.
+//!
+//! Approximation: a lookup returns the node's filtered mean only (its uv gradient and spread
+//! over the footprint read as zero), so nodes downstream of a cached node treat it as locally
+//! constant over the footprint. Lookups finer than level 0 evaluate the node directly.
+
+use crate::error::{Error, Result};
+use crate::shading::{Material, SceneGraph};
+use cache::{CacheConfig, CacheStats, Filter, TexelFormat, TextureDesc, TextureId, TileCache};
+use graph::{EvalScratch, Filtered, Footprint, Graph, Moments, NodeId, NodeOverride, Source, ValueType};
+use std::cell::RefCell;
+use std::str::FromStr;
+
+/// Texels per uv unit at level 0 of every cached node (2^14): finer than any footprint the demo
+/// scenes ask for at close range; a virtual texture costs memory only where it is read.
+pub const LEVEL0_TEXELS_PER_UV: f32 = 16384.0;
+/// Coarsest level (texels 2^6 uv units wide).
+pub const MAX_LEVEL: u8 = 20;
+
+/// Which nodes to cache (`--strategy`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Strategy {
+    /// Evaluate every node on every request (shade on hit).
+    None,
+    /// Cache only the nodes whose values the materials read (graph outputs).
+    Outputs,
+    /// Cache every node that computes a value (not `texcoord`, `constant` or coordinate-valued
+    /// nodes, whose caching would only lose precision).
+    All,
+    /// Cache the named nodes (`nodegraph/node`, or `node` when unique).
+    Nodes(Vec<String>),
+}
+
+impl FromStr for Strategy {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Ok(match s {
+            "none" => Strategy::None,
+            "outputs" => Strategy::Outputs,
+            "all" => Strategy::All,
+            _ => match s.strip_prefix("nodes:") {
+                Some(list) if !list.trim().is_empty() => {
+                    Strategy::Nodes(list.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect())
+                }
+                _ => return Err(format!("unknown strategy '{s}' (expected none, outputs, all or nodes:a,b,c)")),
+            },
+        })
+    }
+}
+
+fn channels(ty: ValueType) -> Option<u8> {
+    match ty {
+        ValueType::Float | ValueType::Integer | ValueType::Boolean => Some(1),
+        ValueType::Vector2 => Some(2),
+        ValueType::Vector3 | ValueType::Color3 => Some(3),
+        ValueType::Vector4 | ValueType::Color4 => None,
+    }
+}
+
+/// Whether caching node `id` can pay: it computes something and is not a coordinate.
+fn worth_caching(g: &Graph, id: NodeId) -> bool {
+    !matches!(g.node_category(id), "texcoord" | "constant") && g.node_type(id) != ValueType::Vector2
+}
+
+/// The scene's node cache: one virtual texture per cached node.
+pub struct NodeCache {
+    cache: TileCache,
+    /// Per scene graph, per node: its texture when cached.
+    textures: Vec<Vec<Option<TextureId>>>,
+    filter: Filter,
+}
+
+impl NodeCache {
+    /// Builds the cache for `strategy` within `budget_bytes`; `None` for [`Strategy::None`].
+    pub fn new(
+        graphs: &[SceneGraph],
+        materials: &[Material],
+        strategy: &Strategy,
+        budget_bytes: usize,
+    ) -> Result<Option<NodeCache>> {
+        let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
+        match strategy {
+            Strategy::None => return Ok(None),
+            Strategy::Outputs => {
+                for m in materials {
+                    for mg in &m.graphs {
+                        let g = graphs[mg.graph as usize].graph();
+                        for &out in mg.plan.outputs() {
+                            if let Source::Node { node, .. } = g.output(out).source {
+                                chosen[mg.graph as usize][node.0 as usize] |= worth_caching(g, node);
+                            }
+                        }
+                    }
+                }
+            }
+            Strategy::All => {
+                for (gi, sg) in graphs.iter().enumerate() {
+                    for id in sg.graph().node_ids() {
+                        chosen[gi][id.0 as usize] = worth_caching(sg.graph(), id);
+                    }
+                }
+            }
+            Strategy::Nodes(names) => {
+                for name in names {
+                    let mut found = Vec::new();
+                    for (gi, sg) in graphs.iter().enumerate() {
+                        let g = sg.graph();
+                        for id in g.node_ids() {
+                            let full = g.node_name(id);
+                            if full == name || full.rsplit('/').next() == Some(name.as_str()) {
+                                found.push((gi, id));
+                            }
+                        }
+                    }
+                    match found.as_slice() {
+                        [(gi, id)] => {
+                            if channels(graphs[*gi].graph().node_type(*id)).is_none() {
+                                return Err(Error::plain(format!(
+                                    "node '{name}' has 4 channels; the cache stores at most 3"
+                                )));
+                            }
+                            chosen[*gi][id.0 as usize] = true;
+                        }
+                        [] => {
+                            let all: Vec<&str> = graphs
+                                .iter()
+                                .flat_map(|g| g.graph().node_ids().map(|id| g.graph().node_name(id)))
+                                .collect();
+                            return Err(Error::plain(format!(
+                                "--strategy nodes: no node named '{name}' (nodes: {})",
+                                all.join(", ")
+                            )));
+                        }
+                        _ => {
+                            return Err(Error::plain(format!(
+                                "--strategy nodes: '{name}' names several nodes; use the full name nodegraph/node"
+                            )))
+                        }
+                    }
+                }
+            }
+        }
+        // Threads wait for a tile another thread is filling: the direct-evaluation alternative
+        // was measured to change images between thread counts, and images must not.
+        let config = CacheConfig { in_flight: cache::InFlight::Wait, ..CacheConfig::with_budget(budget_bytes) };
+        let mut cache = TileCache::new(config).map_err(|e| Error::plain(format!("--budget-mb: {e}")))?;
+        let mut textures = Vec::with_capacity(graphs.len());
+        for (gi, sg) in graphs.iter().enumerate() {
+            let g = sg.graph();
+            let mut per_node = vec![None; g.node_count()];
+            for id in g.node_ids() {
+                if !chosen[gi][id.0 as usize] {
+                    continue;
+                }
+                let Some(ch) = channels(g.node_type(id)) else { continue };
+                let desc = TextureDesc {
+                    channels: ch,
+                    format: TexelFormat::F16,
+                    texels_per_uv: LEVEL0_TEXELS_PER_UV,
+                    max_level: MAX_LEVEL,
+                };
+                per_node[id.0 as usize] = Some(cache.add_texture(desc).map_err(|e| Error::plain(e.to_string()))?);
+            }
+            textures.push(per_node);
+        }
+        Ok(Some(NodeCache { cache, textures, filter: Filter::anisotropic(8.0) }))
+    }
+
+    /// Number of cached nodes.
+    pub fn cached_nodes(&self) -> usize {
+        self.textures.iter().flatten().filter(|t| t.is_some()).count()
+    }
+
+    /// Names of the cached nodes, per graph.
+    pub fn cached_node_names<'a>(&self, graphs: &'a [SceneGraph]) -> Vec<&'a str> {
+        let mut names = Vec::new();
+        for (gi, per_node) in self.textures.iter().enumerate() {
+            for (n, t) in per_node.iter().enumerate() {
+                if t.is_some() {
+                    names.push(graphs[gi].graph().node_name(NodeId(n as u32)));
+                }
+            }
+        }
+        names
+    }
+
+    /// The cache's statistics.
+    pub fn stats(&self) -> CacheStats {
+        self.cache.stats()
+    }
+}
+
+/// Per-thread access to a [`NodeCache`]: scratch memory for tile fills (a fill evaluates a node,
+/// whose cached inputs may fill further tiles, so fills nest).
+pub struct CacheAccess<'a> {
+    cache: &'a NodeCache,
+    graphs: &'a [SceneGraph],
+    pool: RefCell<Vec<Vec<EvalScratch>>>,
+    /// Statistics of fill evaluations, merged at the end.
+    pub(crate) fill_stats: RefCell<Vec<graph::EvalStats>>,
+}
+
+impl<'a> CacheAccess<'a> {
+    /// Access for one thread.
+    pub fn new(cache: &'a NodeCache, graphs: &'a [SceneGraph]) -> Self {
+        CacheAccess {
+            cache,
+            graphs,
+            pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()),
+            fill_stats: RefCell::new(vec![graph::EvalStats::default(); graphs.len()]),
+        }
+    }
+
+    /// The override for graph `graph`.
+    pub fn for_graph(&self, graph: u32) -> GraphOverride<'_, 'a> {
+        GraphOverride { access: self, graph }
+    }
+
+    fn fill(&self, graph: u32, node: NodeId, fp: &Footprint) -> Filtered {
+        let g = self.graphs[graph as usize].graph();
+        let mut scratch = self.pool.borrow_mut()[graph as usize].pop().unwrap_or_else(|| EvalScratch::new(g));
+        let f = g.eval_node_direct(node, fp, &mut scratch, &self.for_graph(graph));
+        scratch.merge_stats_into(&mut self.fill_stats.borrow_mut()[graph as usize]);
+        scratch.reset_stats();
+        self.pool.borrow_mut()[graph as usize].push(scratch);
+        f
+    }
+}
+
+/// The [`NodeOverride`] that answers cached nodes of one graph from the tile cache.
+pub struct GraphOverride<'s, 'a> {
+    access: &'s CacheAccess<'a>,
+    graph: u32,
+}
+
+impl NodeOverride for GraphOverride<'_, '_> {
+    fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
+        let nc = self.access.cache;
+        let tex = nc.textures[self.graph as usize][node.0 as usize]?;
+        if cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < 0.0 {
+            return None; // finer than level 0: evaluate directly
+        }
+        let fill = |req: cache::TexelRequest| {
+            let f = self.access.fill(self.graph, node, &Footprint::new(req.uv, req.covariance()));
+            [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
+        };
+        let v = nc.cache.lookup(tex, fp.uv, fp.cov, nc.filter, &fill);
+        let ty = self.access.graphs[self.graph as usize].graph().node_type(node);
+        let mut out = Filtered::constant(graph::Value::splat(ty, 0.0));
+        for (k, m) in out.ch.iter_mut().enumerate().take(3) {
+            *m = Moments::constant(v[k]);
+        }
+        Some(out)
+    }
+}
+
+/// Adds `from` into `into` (per-node counts and work).
+pub fn merge_eval_stats(into: &mut graph::EvalStats, from: &graph::EvalStats) {
+    if into.evaluations.len() < from.evaluations.len() {
+        into.evaluations.resize(from.evaluations.len(), 0);
+        into.lookups.resize(from.lookups.len(), 0);
+    }
+    for (x, y) in into.evaluations.iter_mut().zip(&from.evaluations) {
+        *x += y;
+    }
+    for (x, y) in into.lookups.iter_mut().zip(&from.lookups) {
+        *x += y;
+    }
+    into.work.merge(&from.work);
+}
