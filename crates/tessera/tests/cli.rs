@@ -168,3 +168,41 @@ fn footprint_aov_grows_toward_the_horizon() {
     assert!(lod(130) > lod(250) + 1.0, "far {} near {}", lod(130), lod(250));
     assert!(img.pixels().all(|p| p.0.iter().all(|c| c.is_finite())));
 }
+
+#[test]
+fn strategies_from_the_command_line() {
+    let dir = temp_dir("strategy");
+    let out = tessera()
+        .current_dir(&dir)
+        .args([
+            "render",
+            "-D",
+            "res=24",
+            "-D",
+            "spp=1",
+            "--strategy",
+            "outputs",
+            "--budget-mb",
+            "8",
+            "--out",
+            "s.exr",
+            "--stats-json",
+            "s.json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("s.json")).unwrap()).unwrap();
+    let cache = &stats["cache"];
+    assert!(cache["lookups"].as_u64().unwrap() > 0 && cache["tiles_filled"].as_u64().unwrap() > 0);
+    assert!(cache["peak_bytes"].as_u64().unwrap() <= 8 << 20);
+    assert!(!cache["cached_nodes"].as_array().unwrap().is_empty());
+    expect_failure(&["render", "-D", "res=8", "--strategy", "nodes:nope"], &dir, &["nope"]);
+    expect_failure(&["render", "-D", "res=8", "--strategy", "sometimes"], &dir, &["strategy"]);
+    expect_failure(&["render", "-D", "res=8", "--strategy", "all", "--budget-mb", "0"], &dir, &["budget"]);
+    expect_failure(
+        &["render", "-D", "res=8", "--strategy", "all", "--budget-mb", "0.0001"],
+        &dir,
+        &["smaller than one tile"],
+    );
+}
