@@ -188,6 +188,9 @@ pub trait PathObserver {
 pub struct NoObserver;
 impl PathObserver for NoObserver {}
 
+/// A tile's pixels (radiance, footprint AOV), counters and graph statistics.
+type TileResult = (Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>);
+
 /// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
 pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
     render_cached(scene, settings, None, progress)
@@ -205,7 +208,7 @@ pub fn render_cached(
     let tiles_x = w.div_ceil(TILE);
     let tiles_y = h.div_ceil(TILE);
     let tiles: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<(Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>)> = tiles
+    let results: Vec<TileResult> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let (x0, y0) = (tx * TILE, ty * TILE);

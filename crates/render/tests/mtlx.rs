@@ -123,7 +123,6 @@ fn wood_floor_direct() -> render::scene::Scene {
     let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
     let text = std::fs::read_to_string(scenes.join("wood_floor.xml")).unwrap();
     let start = text.find("<shape type=\"rectangle\" id=\"sun\">").expect("sun");
-    let end = text.find("</scene>").unwrap();
     let lights = r#"<emitter type="directional"><vector name="direction" x="0.4" y="-0.6" z="-0.5"/><rgb name="irradiance" value="3"/></emitter>"#;
     let text = format!("{}{lights}\n</scene>\n", &text[..start])
         .replace("<integer name=\"max_depth\" value=\"8\"/>", "<integer name=\"max_depth\" value=\"2\"/>");

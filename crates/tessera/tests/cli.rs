@@ -130,10 +130,10 @@ fn footprint_command_prints_a_consistent_path() {
     for vx in vertices.iter().filter(|v| v.get("cov_world").is_some()) {
         let w: Vec<Vec<f64>> = serde_json::from_value(vx["cov_world"].clone()).unwrap();
         let n: Vec<f64> = serde_json::from_value(vx["normal"].clone()).unwrap();
-        for i in 0..3 {
-            assert!(w[i][i] >= 0.0);
-            for j in 0..3 {
-                assert!(w[i][j].is_finite() && (w[i][j] - w[j][i]).abs() <= 1e-9 * (1.0 + w[i][i].abs()));
+        for (i, row) in w.iter().enumerate() {
+            assert!(row[i] >= 0.0);
+            for (j, x) in row.iter().enumerate() {
+                assert!(x.is_finite() && (x - w[j][i]).abs() <= 1e-9 * (1.0 + row[i].abs()));
             }
         }
         // T Σ Tᵀ lies in the tangent plane: the shading normal is in its null space.

@@ -221,6 +221,7 @@ impl BsdfModel {
 
 /// Scene-level BSDF description with textured parameters, filled by the scene loader.
 #[derive(Clone, Debug)]
+#[allow(clippy::large_enum_variant)] // one per material, never per sample
 pub enum BsdfDesc {
     /// Mitsuba `diffuse`.
     Diffuse {
