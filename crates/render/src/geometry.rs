@@ -581,18 +581,9 @@ pub fn mesh_area_distribution(mesh: &TriangleMesh) -> Option<crate::sampling::Di
 mod tests {
     use super::*;
 
+    /// Mitsuba's rectangle: [−1, 1]² at z = 0, uv = ((x+1)/2, (y+1)/2).
     fn quad() -> TriangleMesh {
-        TriangleMesh {
-            positions: vec![
-                Vec3::new(-1.0, -1.0, 0.0),
-                Vec3::new(1.0, -1.0, 0.0),
-                Vec3::new(1.0, 1.0, 0.0),
-                Vec3::new(-1.0, 1.0, 0.0),
-            ],
-            normals: None,
-            uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
-            indices: vec![[0, 1, 2], [0, 2, 3]],
-        }
+        crate::loader::rectangle_mesh()
     }
 
     fn mesh_shape(mesh: TriangleMesh) -> Shape {
