@@ -66,7 +66,8 @@ fn costly(r: TexelRequest) -> [f32; 3] {
     for k in 0..8 {
         let f = 1.7f32.powi(k) * 0.5;
         let a = k as f32 * 0.77;
-        v += (f * (r.uv.x * a.cos() + r.uv.y * a.sin()) * 6.283).sin() * (-f * f * r.texel_size * r.texel_size).exp();
+        v += (f * (r.uv.x * a.cos() + r.uv.y * a.sin()) * std::f32::consts::TAU).sin()
+            * (-f * f * r.texel_size * r.texel_size).exp();
     }
     [v, v * 0.5, 1.0]
 }
@@ -95,7 +96,9 @@ fn hits(crit: &mut Criterion) {
         for coherent in [true, false] {
             let q = hit_queries(coherent, filter);
             g.throughput(Throughput::Elements(q.len() as u64));
-            for (variant, micro_cache, count_requests) in [("micro8", 8, true), ("micro4", 4, true), ("micro0", 0, true), ("nocount", 4, false)] {
+            for (variant, micro_cache, count_requests) in
+                [("micro8", 8, true), ("micro4", 4, true), ("micro0", 0, true), ("nocount", 4, false)]
+            {
                 let config = CacheConfig { micro_cache, count_requests, ..CacheConfig::with_budget(1 << 30) };
                 let (c, id) = cache(config, TexelFormat::F32);
                 run(&c, id, &q, &cheap);
@@ -113,8 +116,13 @@ fn hits(crit: &mut Criterion) {
 
 fn fills(crit: &mut Criterion) {
     let mut g = crit.benchmark_group("fill");
-    for (t, format) in [(8, TexelFormat::F32), (16, TexelFormat::F32), (32, TexelFormat::F32), (64, TexelFormat::F32), (16, TexelFormat::F16)]
-    {
+    for (t, format) in [
+        (8, TexelFormat::F32),
+        (16, TexelFormat::F32),
+        (32, TexelFormat::F32),
+        (64, TexelFormat::F32),
+        (16, TexelFormat::F16),
+    ] {
         let config = CacheConfig { tile_size: t, ..CacheConfig::with_budget(4 << 20) };
         let (c, id) = cache(config, format);
         let texels = u64::from((t + 1) * (t + 1));

@@ -28,6 +28,10 @@ const SHARDS: usize = 64;
 /// Most evictions one reservation may make before it gives up and evaluates directly.
 const MAX_EVICTIONS_PER_RESERVE: usize = 64;
 
+/// Most evicted keys remembered for counting refills (about 16 MiB, outside the budget); beyond
+/// it, evictions are not remembered and `refills` undercounts.
+const EVICTED_KEYS_MAX: usize = 1 << 20;
+
 /// Texel coordinates are clamped to `±2³¹` so tile coordinates fit an `i32` at any tile size.
 const TEXEL_LIMIT: f64 = 2_147_483_000.0;
 
@@ -469,7 +473,9 @@ impl TileCache {
                     second_chances -= 1;
                     continue;
                 }
-                clock.evicted.insert(tile.key);
+                if clock.evicted.len() < EVICTED_KEYS_MAX {
+                    clock.evicted.insert(tile.key);
+                }
                 break tile;
             }
         };
@@ -560,6 +566,12 @@ mod tests {
     /// A point lookup at level `level` (level-clamped filter).
     fn at<F: Fn(TexelRequest) -> Texel>(c: &TileCache, id: TextureId, uv: Vec2, level: u8, fill: &F) -> Texel {
         c.lookup(id, uv, Mat2::ZERO, Filter::TRILINEAR.levels(level, level), fill)
+    }
+
+    #[test]
+    fn cache_is_send_and_sync() {
+        fn check<T: Send + Sync>() {}
+        check::<TileCache>();
     }
 
     #[test]

@@ -63,7 +63,11 @@ pub const MAX_LEVEL: u8 = 31;
 pub const MAX_ANISOTROPY: f32 = 16.0;
 /// Most entries of the per-thread micro-cache ([`CacheConfig::micro_cache`]).
 pub const MICRO_CACHE_MAX: usize = 8;
-/// Tile side `T` used by [`CacheConfig::default`], chosen by the `tile_size` benchmark.
+/// Tile side `T` used by [`CacheConfig::default`], chosen by the `tile_size` benchmark: on its
+/// render-like trace (3 MiB budget, ~100 ns fill) T = 8, 16, 32, 64 took 1.26, 1.05, 1.02 and
+/// 1.17 µs per lookup and filled 8.1, 7.1, 7.6 and 9.4 texels per lookup; 16 fills the fewest
+/// texels (what matters when fills are expensive) for the same time as 32, and wastes 13 % on
+/// borders (8: 27 %, 32: 6 %).
 pub const DEFAULT_TILE_SIZE: u32 = 16;
 
 /// How texels are stored.
@@ -103,6 +107,12 @@ pub struct TextureDesc {
 pub struct TextureId(pub u32);
 
 /// What a thread does when the tile it needs is being filled by another thread.
+///
+/// [`InFlight::Evaluate`] is the default: a waiting render thread is a lost core, while
+/// evaluating four texels costs a small fraction of a tile's `(T + 1)²`. Measured
+/// (`in_flight` benchmark, two threads interleaving a render-like trace on a cold cache, 16×16
+/// tiles, a ~100 ns fill): 750 ns per lookup with `Evaluate` against 1150 ns with `Wait`, for
+/// 3 % more texels evaluated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum InFlight {
     /// Block until the fill completes, then read the tile. Each texel's fill runs exactly once
@@ -115,6 +125,10 @@ pub enum InFlight {
 }
 
 /// Which resident tile makes room for a new one.
+///
+/// [`Eviction::Clock`] is the default: on the `eviction` benchmark's render-like trace under a
+/// 1 MiB budget it filled 10.9 texels per lookup against FIFO's 15.6 (1.34 µs against 1.77 µs
+/// per lookup).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Eviction {
     /// CLOCK (second chance): tiles enter unreferenced; a hit sets the tile's reference bit; the
@@ -137,7 +151,11 @@ pub struct CacheConfig {
     pub eviction: Eviction,
     /// Tiles each thread keeps its own strong reference to (0 to [`MICRO_CACHE_MAX`]), so a hit
     /// on one of them takes no lock and no shared write. These tiles stay alive (and counted in
-    /// the budget) until the thread replaces them, even after eviction.
+    /// the budget) until the thread replaces them, even after eviction or after the cache is
+    /// dropped, so a budget should be well above `threads × micro_cache × tile bytes`; below
+    /// that, lookups fall back to direct evaluation. Default 4: on the `hit` benchmark it cut
+    /// coherent hits from 120 to 81 ns (trilinear) and 433 to 292 ns (anisotropic), and costs
+    /// ~25 ns on scattered trilinear hits; 8 entries gained nothing.
     pub micro_cache: usize,
     /// Count lookups and tile requests on the hit path (per-thread striped counters). Off, hits
     /// and requests read 0 in [`CacheStats`]; miss-side counters are always kept.
@@ -174,9 +192,10 @@ pub enum FilterKind {
     Trilinear,
     /// Trilinear probes along the footprint's major axis. The probes' level is [`level_for`] of
     /// the isotropic covariance `σ²I` with `σ = max(σ_minor, σ_major / max_anisotropy)`; the
-    /// `2m + 1` probes are spaced at most `σ / PROBE_DENSITY` apart (`m ≤ ⌈1.25 · max_anisotropy⌉`)
-    /// with Gaussian weights whose variance is the remaining `σ_major² − σ_probe²`, so the
-    /// probes' mixture has the footprint's covariance.
+    /// `2m + 1` probes (`m = ⌈1.25 r / σ_p⌉ ≤ ⌈1.25 · max_anisotropy⌉`) lie on the major axis
+    /// about `1.8 σ_p` apart, with Gaussian weights whose variance is the remaining
+    /// `r² = σ_major² − σ_p²` (`σ_p`: the probes' blur at their level), so the probes' mixture
+    /// has the footprint's covariance.
     Anisotropic {
         /// Largest ratio `σ_major / σ_probe` (1 to [`MAX_ANISOTROPY`]); beyond it the probes
         /// blur the minor axis. Bounds the probe count.

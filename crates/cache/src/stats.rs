@@ -32,7 +32,8 @@ pub struct LevelStats {
     pub texels_direct: u64,
     /// Tiles evicted.
     pub evictions: u64,
-    /// Fills of tiles that had been evicted before.
+    /// Fills of tiles that had been evicted before (the cache remembers up to 2²⁰ evicted keys;
+    /// past that, a lower bound).
     pub refills: u64,
     /// Bytes of live tiles now.
     pub resident_bytes: u64,
