@@ -11,7 +11,7 @@
 //! constant over the footprint. Lookups finer than level 0 evaluate the node directly.
 
 use crate::error::{Error, Result};
-use crate::shading::{Material, SceneGraph};
+use crate::shading::SceneGraph;
 use cache::{CacheConfig, CacheStats, Filter, TexelFormat, TextureDesc, TextureId, TileCache};
 use graph::{EvalScratch, Filtered, Footprint, Graph, Moments, NodeId, NodeOverride, Source, ValueType};
 use std::cell::RefCell;
@@ -35,6 +35,10 @@ pub enum Strategy {
     All,
     /// Cache the named nodes (`nodegraph/node`, or `node` when unique).
     Nodes(Vec<String>),
+    /// The texture-baking workflow: before rendering, evaluate every bound output over the uv
+    /// rectangle the scene's shapes use at `RES × RES` texels with all coarser mip levels, then
+    /// sample it like a bitmap (footprints finer than a baked texel read the finest level).
+    Bake(u32),
 }
 
 impl FromStr for Strategy {
@@ -44,11 +48,23 @@ impl FromStr for Strategy {
             "none" => Strategy::None,
             "outputs" => Strategy::Outputs,
             "all" => Strategy::All,
+            _ if s.starts_with("bake:") => {
+                let res: u32 =
+                    s[5..].parse().map_err(|_| format!("bake:RES needs a whole number of texels, got '{s}'"))?;
+                if !(1..=65536).contains(&res) {
+                    return Err(format!("bake resolution must be 1 to 65536 texels, got {res}"));
+                }
+                Strategy::Bake(res)
+            }
             _ => match s.strip_prefix("nodes:") {
                 Some(list) if !list.trim().is_empty() => {
                     Strategy::Nodes(list.split(',').map(|n| n.trim().to_string()).filter(|n| !n.is_empty()).collect())
                 }
-                _ => return Err(format!("unknown strategy '{s}' (expected none, outputs, all or nodes:a,b,c)")),
+                _ => {
+                    return Err(format!(
+                        "unknown strategy '{s}' (expected none, outputs, all, nodes:a,b,c or bake:RES)"
+                    ))
+                }
             },
         })
     }
@@ -74,19 +90,71 @@ pub struct NodeCache {
     /// Per scene graph, per node: its texture when cached.
     textures: Vec<Vec<Option<TextureId>>>,
     filter: Filter,
+    /// Baked textures read every footprint from the cache (finer ones clamp to level 0).
+    baked: bool,
+}
+
+/// A uv rectangle `(min, max)`.
+type UvRect = (glam::Vec2, glam::Vec2);
+
+fn union(r: Option<UvRect>, lo: glam::Vec2, hi: glam::Vec2) -> Option<UvRect> {
+    Some(match r {
+        Some((l, h)) => (l.min(lo), h.max(hi)),
+        None => (lo, hi),
+    })
+}
+
+/// The uv rectangle each material's shapes cover.
+fn material_uv_bounds(scene: &crate::scene::Scene) -> Vec<Option<UvRect>> {
+    use crate::geometry::ShapeGeometry;
+    let mut b: Vec<Option<UvRect>> = vec![None; scene.materials.len()];
+    for shape in &scene.shapes {
+        let (lo, hi) = match &shape.geometry {
+            ShapeGeometry::Mesh { mesh, .. } => match &mesh.uvs {
+                Some(uvs) => {
+                    uvs.iter().fold((glam::Vec2::splat(f32::MAX), glam::Vec2::splat(f32::MIN)), |(l, h), u| {
+                        (l.min(*u), h.max(*u))
+                    })
+                }
+                None => (glam::Vec2::ZERO, glam::Vec2::ONE),
+            },
+            // Spheres (φ/2π, θ/π) and disks (r, φ/2π) map onto [0, 1]².
+            ShapeGeometry::Sphere { .. } | ShapeGeometry::Disk { .. } => (glam::Vec2::ZERO, glam::Vec2::ONE),
+        };
+        let e = &mut b[shape.material as usize];
+        *e = union(*e, lo, hi);
+    }
+    b
 }
 
 impl NodeCache {
     /// Builds the cache for `strategy` within `budget_bytes`; `None` for [`Strategy::None`].
-    pub fn new(
-        graphs: &[SceneGraph],
-        materials: &[Material],
-        strategy: &Strategy,
-        budget_bytes: usize,
-    ) -> Result<Option<NodeCache>> {
+    /// For [`Strategy::Bake`] the textures are filled before this returns.
+    pub fn new(scene: &crate::scene::Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
+        let (graphs, materials) = (&scene.graphs[..], &scene.materials[..]);
         let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
+        // For bakes: the uv rectangle each output node must cover.
+        let mut rects: Vec<Vec<Option<UvRect>>> = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
         match strategy {
             Strategy::None => return Ok(None),
+            Strategy::Bake(_) => {
+                let bounds = material_uv_bounds(scene);
+                for (mi, m) in materials.iter().enumerate() {
+                    let Some((lo, hi)) = bounds[mi] else { continue };
+                    for mg in &m.graphs {
+                        let g = graphs[mg.graph as usize].graph();
+                        for &out in mg.plan.outputs() {
+                            if let Source::Node { node, .. } = g.output(out).source {
+                                if channels(g.node_type(node)).is_some() {
+                                    chosen[mg.graph as usize][node.0 as usize] = true;
+                                    let r = &mut rects[mg.graph as usize][node.0 as usize];
+                                    *r = union(*r, lo, hi);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
             Strategy::Outputs => {
                 for m in materials {
                     for mg in &m.graphs {
@@ -159,17 +227,68 @@ impl NodeCache {
                     continue;
                 }
                 let Some(ch) = channels(g.node_type(id)) else { continue };
-                let desc = TextureDesc {
-                    channels: ch,
-                    format: TexelFormat::F16,
-                    texels_per_uv: LEVEL0_TEXELS_PER_UV,
-                    max_level: MAX_LEVEL,
+                let (texels_per_uv, max_level) = match (strategy, rects[gi][id.0 as usize]) {
+                    (Strategy::Bake(res), Some((lo, hi))) => {
+                        let extent = (hi - lo).max_element().max(1e-6);
+                        (*res as f32 / extent, (*res as f32).log2().ceil().clamp(0.0, cache::MAX_LEVEL as f32) as u8)
+                    }
+                    _ => (LEVEL0_TEXELS_PER_UV, MAX_LEVEL),
                 };
+                let desc = TextureDesc { channels: ch, format: TexelFormat::F16, texels_per_uv, max_level };
                 per_node[id.0 as usize] = Some(cache.add_texture(desc).map_err(|e| Error::plain(e.to_string()))?);
             }
             textures.push(per_node);
         }
-        Ok(Some(NodeCache { cache, textures, filter: Filter::anisotropic(8.0) }))
+        let baked = matches!(strategy, Strategy::Bake(_));
+        let nc = NodeCache { cache, textures, filter: Filter::anisotropic(8.0), baked };
+        if baked {
+            nc.bake(graphs, &rects)?;
+        }
+        Ok(Some(nc))
+    }
+
+    /// Fills every tile of every level of the baked textures over their uv rectangles.
+    fn bake(&self, graphs: &[SceneGraph], rects: &[Vec<Option<UvRect>>]) -> Result<()> {
+        use rayon::prelude::*;
+        let t = self.cache.config().tile_size as f32;
+        let mut jobs = Vec::new();
+        let mut bytes = 0usize;
+        for (gi, per_node) in self.textures.iter().enumerate() {
+            for (n, tex) in per_node.iter().enumerate() {
+                let (Some(tex), Some((lo, hi))) = (tex, rects[gi][n]) else { continue };
+                let desc = self.cache.texture(*tex);
+                for level in 0..=desc.max_level {
+                    let d = desc.texels_per_uv / (1u64 << level) as f32;
+                    let (x0, y0) = ((lo.x * d / t).floor() as i64, (lo.y * d / t).floor() as i64);
+                    let (x1, y1) = ((hi.x * d / t).floor() as i64, (hi.y * d / t).floor() as i64);
+                    for ty in y0..=y1 {
+                        for tx in x0..=x1 {
+                            let centre = glam::Vec2::new((tx as f32 + 0.5) * t / d, (ty as f32 + 0.5) * t / d);
+                            jobs.push((gi as u32, NodeId(n as u32), *tex, level, centre));
+                            bytes += self.cache.tile_bytes(*tex);
+                        }
+                    }
+                }
+            }
+        }
+        if bytes > self.cache.config().budget_bytes {
+            return Err(Error::plain(format!(
+                "the bake needs {:.1} MiB but --budget-mb allows {:.1} MiB; raise the budget or lower the resolution",
+                bytes as f64 / 1048576.0,
+                self.cache.config().budget_bytes as f64 / 1048576.0
+            )));
+        }
+        jobs.par_iter().for_each_init(
+            || CacheAccess::new(self, graphs),
+            |access, &(g, node, tex, level, centre)| {
+                let fill = |req: cache::TexelRequest| {
+                    let f = access.fill(g, node, &Footprint::new(req.uv, req.covariance()));
+                    [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
+                };
+                self.cache.lookup_level(tex, centre, level as f32, &fill);
+            },
+        );
+        Ok(())
     }
 
     /// Number of cached nodes.
@@ -243,7 +362,7 @@ impl NodeOverride for GraphOverride<'_, '_> {
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
         let tex = nc.textures[self.graph as usize][node.0 as usize]?;
-        if cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < 0.0 {
+        if !nc.baked && cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < 0.0 {
             return None; // finer than level 0: evaluate directly
         }
         let fill = |req: cache::TexelRequest| {

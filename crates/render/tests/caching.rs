@@ -14,7 +14,7 @@ fn marble() -> Scene {
 }
 
 fn run(scene: &Scene, strategy: &str, budget: usize, threads: usize, spp: u32) -> (Image, Option<cache::CacheStats>) {
-    let nc = NodeCache::new(&scene.graphs, &scene.materials, &strategy.parse().unwrap(), budget).unwrap();
+    let nc = NodeCache::new(scene, &strategy.parse().unwrap(), budget).unwrap();
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
     let img = pool.install(|| render_cached(scene, RenderSettings::new(spp, 9), nc.as_ref(), &|_| {}).image);
     (img, nc.map(|c| c.stats()))
@@ -65,12 +65,7 @@ fn images_do_not_depend_on_threads_or_budget() {
 #[test]
 fn bad_strategies_are_clear_errors() {
     let scene = marble();
-    let err = |s: &str, budget: usize| match NodeCache::new(
-        &scene.graphs,
-        &scene.materials,
-        &s.parse::<Strategy>().unwrap(),
-        budget,
-    ) {
+    let err = |s: &str, budget: usize| match NodeCache::new(&scene, &s.parse::<Strategy>().unwrap(), budget) {
         Ok(_) => panic!("{s}: expected an error"),
         Err(e) => e.to_string(),
     };
@@ -82,4 +77,23 @@ fn bad_strategies_are_clear_errors() {
     assert!(e.contains("smaller than one tile"), "{e}");
     assert!("sometimes".parse::<Strategy>().is_err());
     assert!("nodes:".parse::<Strategy>().is_err());
+}
+
+#[test]
+fn baked_textures_approximate_direct_evaluation() {
+    let scene = marble();
+    let (none, _) = run(&scene, "none", 1 << 29, 2, 4);
+    let (baked, stats) = run(&scene, "bake:256", 1 << 29, 2, 4);
+    let stats = stats.unwrap();
+    let e = relative_mse(&baked, &none);
+    eprintln!("bake:256 relMSE vs direct evaluation {e:.3e}, {} tiles", stats.total().fills);
+    // A 256² bake of a 48-pixel-wide view is finer than any footprint it is read at; the bound
+    // allows for the bilinear/anisotropic reconstruction of f16 tiles.
+    assert!(e < 0.05, "{e:.3e}");
+    // A bake that does not fit the budget is refused up front.
+    match NodeCache::new(&scene, &"bake:4096".parse().unwrap(), 1 << 20) {
+        Err(err) => assert!(err.to_string().contains("bake needs"), "{err}"),
+        Ok(_) => panic!("a 4096² bake cannot fit 1 MiB"),
+    }
+    assert!("bake:0".parse::<Strategy>().is_err() && "bake:x".parse::<Strategy>().is_err());
 }

@@ -176,8 +176,9 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
         bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", args.budget_mb);
     }
-    let node_cache =
-        NodeCache::new(&scene.graphs, &scene.materials, &args.strategy, (args.budget_mb * 1048576.0) as usize)?;
+    let t_cache = Instant::now();
+    let node_cache = pool.install(|| NodeCache::new(&scene, &args.strategy, (args.budget_mb * 1048576.0) as usize))?;
+    let cache_setup_s = t_cache.elapsed().as_secs_f64();
     let out = pool.install(|| render_cached(&scene, settings, node_cache.as_ref(), &|n| bar.inc(n)));
     bar.finish_and_clear();
 
@@ -247,7 +248,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             "spp": spp,
             "seed": seed,
             "threads": threads,
-            "phases": { "load_s": load_s, "render_s": render_s, "write_s": write_s },
+            "phases": { "load_s": load_s, "cache_setup_s": cache_setup_s, "render_s": render_s, "write_s": write_s },
             "counts": {
                 "samples": c.samples,
                 "rays": c.rays,
