@@ -252,7 +252,9 @@ impl Graph {
                 }
             }
         }
-        let point = is_point(fp);
+        // Nodes that read their inputs' gradients (heighttonormal) need them at points too.
+        let point =
+            is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].category == "heighttonormal");
         let mut ins = [Filtered::zero(ValueType::Float); 12];
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];

@@ -18,10 +18,13 @@
 //! | family (file) | nodes | filtering |
 //! |---|---|---|
 //! | geometry (`nodes/geometry.rs`) | texcoord, constant, place2d, rotate2d, dot | exact (linear) |
-//! | noise (`nodes/noise.rs`) | noise2d, fractal2d, cellnoise2d, worleynoise2d | Perlin: exact Gaussian convolution of the separable corner kernels up to σ = 0.25 lattice units, Gaussian damping beyond, octaves past the band limit dropped (never evaluated); cell noise: exact cell masses; Worley: 3×3 Gauss–Hermite then the global mean |
+//! | noise (`nodes/noise.rs`) | noise2d, fractal2d, cellnoise2d, worleynoise2d, unifiednoise2d | Perlin: exact Gaussian convolution of the separable corner kernels up to σ = 0.25 lattice units, Gaussian damping beyond, octaves past the band limit dropped (never evaluated); cell noise: exact cell masses; Worley: 3×3 Gauss–Hermite then the global mean; unifiednoise2d: its type's node (fractal3d as an exactly filtered z-slice of 3D Perlin noise), clamped-ramp moments for the output clamp |
 //! | patterns (`nodes/pattern.rs`) | checkerboard, ramplr, ramptb, ramp4, splitlr, splittb, randomfloat, randomcolor | closed forms: square-wave expectations (erf sums / damped Fourier series), clamped-ramp moments, step probabilities Φ |
+//! | shapes (`nodes/shape.rs`) | circle, line, hexagon, grid, crosshatch, tiledcircles, tiledhexagons | coverage probabilities: grid closed form (periodic band masses); convex pieces (disk, capsule, hexagon, strips, clipped to cells) by Gauss–Legendre over the footprint's narrow axis of closed-form Φ chord masses along the other; tiled patterns become their coverage beyond 0.6 cells |
 //! | math (`nodes/math.rs`) | add … ifequal (see the file) | exact for linear nodes; closed forms for abs, clamp, min/max, smoothstep, floor/ceil/round/fract/modulo, sign, sin/cos, exp, conditionals; Gauss–Hermite / cubature for the rest |
 //! | channels (`nodes/channel.rs`) | combine2/3/4, extract, separate2/3/4, convert | exact |
+//! | images (`nodes/image.rs`) | image, tiledimage | PNG (8/16 bit) / EXR, sRGB decoded at load; up to 1 texel the exact Gaussian average of the bilinear reconstruction (closed-form tent integrals), beyond it the same on a mip pyramid at lod = log2 σ, blended between levels; address modes periodic / clamp / mirror / constant (the default blended by the footprint's mass outside) |
+//! | normal maps (`nodes/normal.rs`) | normalmap, heighttonormal | normalmap: cubature (flat tangent frame by default); heighttonormal: the normal of the filtered height's slope (gradients are kept at point footprints for it) |
 //! | colour (`nodes/color.rs`) | luminance, saturate, contrast, rgbtohsv, hsvtorgb, hsvadjust | exact when linear; cubature otherwise |
 //!
 //! Evaluation ([`eval`]) uses a per-thread [`EvalScratch`] (no allocation per evaluation),

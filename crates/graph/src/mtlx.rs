@@ -444,7 +444,8 @@ impl<'a, 'i> Importer<'a, 'i> {
                 let si = if let Some(id) = existing {
                     ShaderInput::Output(Ok(id))
                 } else if connected {
-                    let out_name = format!("{sname}.{iname}");
+                    // Shaders in different graphs may share a name: qualify by the scope.
+                    let out_name = qualify(scope, &format!("{sname}.{iname}"));
                     let res = match self.input_source(scope, inp) {
                         Ok(Some(src)) => {
                             let ty = self.builder.source_type(&src);
@@ -630,10 +631,21 @@ impl<'a, 'i> Importer<'a, 'i> {
         for inp in el.children().filter(|c| c.is_element() && c.has_tag_name("input")) {
             let iname = inp.attribute("name").unwrap_or("");
             if let Some(p) = def.params.iter().find(|p| **p == iname) {
-                let value = inp.attribute("value").unwrap_or("").to_string();
-                if inp.attribute("type") == Some("filename") {
+                // A string input may take its value from the enclosing graph's interface.
+                let src = inp
+                    .attribute("interfacename")
+                    .and_then(|i| self.scopes.get(scope).and_then(|s| s.interface.get(i)).copied())
+                    .unwrap_or(inp);
+                let value = src.attribute("value").unwrap_or("").to_string();
+                if inp.attribute("type") == Some("filename") || src.attribute("type") == Some("filename") {
                     let path = self.resolve_file(inp, &value)?;
-                    let colorspace = inp.attribute("colorspace").unwrap_or("").to_string();
+                    // The colour space: the input's, the interface's, or inherited.
+                    let colorspace = [inp, src]
+                        .into_iter()
+                        .chain(inp.ancestors().filter(|a| a.is_element()))
+                        .find_map(|e| e.attribute("colorspace"))
+                        .unwrap_or("")
+                        .to_string();
                     params.push(Param::File { name: p.to_string(), path, colorspace });
                 } else {
                     params.push(Param::Str { name: p.to_string(), value });

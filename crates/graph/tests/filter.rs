@@ -18,6 +18,7 @@ const SAMPLES: usize = 2048;
 const CENTRES: usize = 12;
 
 fn graph_of(body: &str) -> Graph {
+    // (Documents here name files by absolute paths.)
     let text =
         format!(r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">{body}</nodegraph></materialx>"#);
     Document::parse(&text, "test.mtlx".as_ref(), &LoadOptions::default()).unwrap().into_graph()
@@ -229,6 +230,102 @@ fn cases() -> Vec<Case> {
             ratio: 0.5,
             coarse: 0.1,
         },
+        Case {
+            name: "unified perlin",
+            body: r#"<unifiednoise2d name="n" type="float"><input name="freq" type="vector2" value="8, 6"/><input name="offset" type="vector2" value="0.3, 1.7"/><input name="jitter" type="float" value="1.0001"/></unifiednoise2d><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.25,
+            coarse: 0.1,
+        },
+        Case {
+            name: "unified cell",
+            body: r#"<unifiednoise2d name="n" type="float"><input name="freq" type="vector2" value="8, 8"/><input name="type" type="integer" value="1"/><input name="outmin" type="float" value="0.2"/><input name="outmax" type="float" value="0.9"/></unifiednoise2d><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.35,
+            coarse: 0.1,
+        },
+        Case {
+            name: "unified worley",
+            body: r#"<unifiednoise2d name="n" type="float"><input name="freq" type="vector2" value="6, 6"/><input name="type" type="integer" value="2"/><input name="jitter" type="float" value="0.8"/></unifiednoise2d><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "unified fractal",
+            body: r#"<unifiednoise2d name="n" type="float"><input name="freq" type="vector2" value="4, 4"/><input name="type" type="integer" value="3"/><input name="octaves" type="integer" value="5"/><input name="jitter" type="float" value="1.00001"/><input name="outmin" type="float" value="0.5"/><input name="clampoutput" type="boolean" value="false"/></unifiednoise2d><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.3,
+            coarse: 0.1,
+        },
+        Case {
+            name: "unified fract clamp",
+            body: r#"<unifiednoise2d name="n" type="float"><input name="freq" type="vector2" value="4, 4"/><input name="type" type="integer" value="3"/></unifiednoise2d><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "circle",
+            body: r#"<circle name="n" type="float"><input name="center" type="vector2" value="0.1, 0.2"/><input name="radius" type="float" value="0.8"/></circle><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "line",
+            body: r#"<line name="n" type="float"><input name="radius" type="float" value="0.15"/><input name="point1" type="vector2" value="-1, -0.5"/><input name="point2" type="vector2" value="1.2, 0.7"/></line><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "hexagon",
+            body: r#"<hexagon name="n" type="float"><input name="center" type="vector2" value="-0.2, 0.3"/><input name="radius" type="float" value="0.9"/></hexagon><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "grid",
+            body: r#"<grid name="n" type="color3"><input name="uvtiling" type="vector2" value="4, 3"/><input name="thickness" type="float" value="0.15"/></grid><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "grid staggered",
+            body: r#"<grid name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 4"/><input name="thickness" type="float" value="0.2"/><input name="staggered" type="boolean" value="true"/></grid><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "crosshatch",
+            body: r#"<crosshatch name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 3"/><input name="thickness" type="float" value="0.1"/><input name="staggered" type="boolean" value="true"/></crosshatch><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "tiledcircles",
+            body: r#"<tiledcircles name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 3"/><input name="size" type="float" value="0.7"/></tiledcircles><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "tiledcircles stag",
+            body: r#"<tiledcircles name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 3"/><input name="size" type="float" value="0.8"/><input name="staggered" type="boolean" value="true"/></tiledcircles><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "tiledhexagons",
+            body: r#"<tiledhexagons name="n" type="color3"><input name="uvtiling" type="vector2" value="2, 3"/><input name="size" type="float" value="0.9"/><input name="staggered" type="boolean" value="true"/></tiledhexagons><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "normalmap(noise)",
+            body: r#"<texcoord name="t" type="vector2"/><multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="4, 4"/></multiply><noise2d name="n" type="vector3"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector3" value="0.3, 0.3, 0.1"/><input name="pivot" type="float" value="0.5"/></noise2d><add name="a" type="vector3"><input name="in1" type="vector3" nodename="n"/><input name="in2" type="vector3" value="0, 0, 0.4"/></add><normalmap name="r" type="vector3"><input name="in" type="vector3" nodename="a"/><input name="scale" type="float" value="0.8"/></normalmap><output name="out" type="vector3" nodename="r"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "heighttonormal",
+            body: r#"<texcoord name="t" type="vector2"/><multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="4, 4"/></multiply><noise2d name="n" type="float"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="float" value="0.5"/></noise2d><heighttonormal name="r" type="vector3"><input name="in" type="float" nodename="n"/><input name="scale" type="float" value="8"/><input name="texcoord" type="vector2" nodename="s"/></heighttonormal><output name="out" type="vector3" nodename="r"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
         Case { name: "demo (17 nodes)", body: DEMO, ratio: 0.5, coarse: 0.1 },
     ]
 }
@@ -250,6 +347,76 @@ fn filtered_matches_supersampling() {
             // Coarse footprints, where point sampling aliases: a small fraction of its error.
             if sigma >= case.coarse && ep > 0.01 && ratio > case.ratio {
                 failures.push(format!("{} σ={sigma}: error ratio {ratio:.3} > {}", case.name, case.ratio));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// A test texture: smooth colour ramps plus texel noise, 48 × 32, written once as an 8-bit PNG.
+fn test_png() -> std::path::PathBuf {
+    static PATH: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("graph-filter-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("tex.png");
+        let mut rng = Rng(0x5eed);
+        let img = image::RgbImage::from_fn(48, 32, |x, y| {
+            let n = rng.uniform() as f32;
+            let r = (x as f32 / 47.0) * 0.6 + 0.4 * n;
+            let g = (y as f32 / 31.0) * 0.5 + 0.3 * (((x / 4 + y / 4) % 2) as f32);
+            let b = n;
+            image::Rgb([(r * 255.0) as u8, (g * 255.0) as u8, (b * 255.0) as u8])
+        });
+        img.save(&path).unwrap();
+        path
+    })
+    .clone()
+}
+
+#[test]
+fn filtered_images_match_supersampling() {
+    let file = test_png();
+    let f = file.display();
+    let bodies = [
+        (
+            "image periodic",
+            format!(
+                r#"<texcoord name="t" type="vector2"/><multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="1.5, 1"/></multiply><image name="n" type="color3"><input name="file" type="filename" value="{f}"/><input name="texcoord" type="vector2" nodename="s"/></image><output name="out" type="color3" nodename="n"/>"#
+            ),
+        ),
+        (
+            "image srgb mirror",
+            format!(
+                r#"<image name="n" type="color3"><input name="file" type="filename" value="{f}" colorspace="srgb_texture"/><input name="uaddressmode" type="string" value="mirror"/><input name="vaddressmode" type="string" value="mirror"/></image><output name="out" type="color3" nodename="n"/>"#
+            ),
+        ),
+        (
+            "image constant",
+            format!(
+                r#"<image name="n" type="float"><input name="file" type="filename" value="{f}"/><input name="default" type="float" value="0.25"/><input name="uaddressmode" type="string" value="constant"/><input name="vaddressmode" type="string" value="constant"/></image><output name="out" type="float" nodename="n"/>"#
+            ),
+        ),
+        (
+            "tiledimage",
+            format!(
+                r#"<tiledimage name="n" type="color3"><input name="file" type="filename" value="{f}"/><input name="uvtiling" type="vector2" value="2, 3"/><input name="uvoffset" type="vector2" value="0.3, 0.1"/></tiledimage><output name="out" type="color3" nodename="n"/>"#
+            ),
+        ),
+    ];
+    let mut failures = Vec::new();
+    println!("{:<18} {:>8} {:>11} {:>11} {:>8} {:>9}", "graph", "sigma", "filt err", "point err", "ratio", "spread");
+    for (ci, (name, body)) in bodies.iter().enumerate() {
+        let g = graph_of(body);
+        let out = g.output_id("g/out").unwrap();
+        for (sigma, ef, ep, spread) in errors(&g, out, 0x1234_5678 ^ ci as u64) {
+            let ratio = ef / ep.max(1e-12);
+            println!("{name:<18} {sigma:>8.0e} {ef:>11.2e} {ep:>11.2e} {ratio:>8.3} {spread:>9.2e}");
+            if sigma <= 1e-4 && ef > 2e-3 {
+                failures.push(format!("{name} σ={sigma}: filtered error {ef:.2e} at a tiny footprint"));
+            }
+            if sigma >= 0.01 && ep > 0.01 && ratio > 0.3 {
+                failures.push(format!("{name} σ={sigma}: error ratio {ratio:.3} > 0.3"));
             }
         }
     }

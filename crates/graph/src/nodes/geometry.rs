@@ -85,7 +85,7 @@ pub(crate) fn texcoord(ctx: &Ctx) -> Filtered {
 }
 
 /// Rotates `(x, y)` by `deg` degrees the way MaterialX's `rotate2d` does.
-fn rotate(x: Moments, y: Moments, deg: f32, ctx: &Ctx) -> (Moments, Moments) {
+pub(crate) fn rotate(x: Moments, y: Moments, deg: f32, ctx: &Ctx) -> (Moments, Moments) {
     let (s, c) = deg.to_radians().sin_cos();
     let rx = add_scaled(affine(x, c, 0.0), y, s, ctx.fp);
     let ry = add_scaled(affine(y, c, 0.0), x, -s, ctx.fp);

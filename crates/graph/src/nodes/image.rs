@@ -1,19 +1,451 @@
-//! Image lookups (`image`, `tiledimage`): not implemented yet. The [`Texture`] type is the
-//! seam a mip-mapped, footprint-filtered lookup will fill.
+//! Image lookups: `image`, `tiledimage`.
+//!
+//! | node | inputs (default) | unfiltered (MaterialX 1.39) | filtered evaluation |
+//! |---|---|---|---|
+//! | `image` | `file`, `layer`, `default` (0), `texcoord` (UV0), `uaddressmode` / `vaddressmode` (periodic), `filtertype`, `framerange`, `frameoffset` (0), `frameendaction` | bilinear lookup of the file at `texcoord`, `v = 0` the bottom row of the file; `constant` address mode: `default` outside [0, 1]; `clamp`, `periodic`, `mirror` wrap as GL does (clamp is exact only while the footprint stays within a few texels of the image: coarse levels clamp to their own edge texels); a missing channel reads 0 (alpha 1), a grey file fills r, g, b | up to σ = 1 texel (major axis): the exact Gaussian average of the bilinear reconstruction (separable: each texel's tent integrated in closed form, ±4σ); beyond, a mip pyramid (box levels halving each axis, exact fractional boxes for odd sizes, built at load): the same exact average at levels ⌊lod⌋ and ⌊lod⌋+1, lod = log2 σ (σ = 1–2 texels there), less the 1/4 texel² a level's box and tent already spread, blended linearly in lod; gradient exact (the tents' derivatives); variance `max(gᵀΣg, E[x²] − E[x]²)` from a pyramid of squares; the constant mode's `default` blended by the footprint's mass outside [0, 1] (Φ per axis) |
+//! | `tiledimage` | `file`, `default` (0), `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `realworldimagesize` (1,1), `realworldtilesize` (1,1), `filtertype`, `framerange`, `frameoffset` (0), `frameendaction` | `image` (periodic) at `(t·uvtiling − uvoffset) / realworldimagesize · realworldtilesize` | the coordinate exactly (affine), then as `image` |
+//!
+//! Files: PNG (8 or 16 bit) and OpenEXR through the `image` crate. `colorspace="srgb_texture"`
+//! (on the input or inherited from an enclosing element) is converted to linear at load, before
+//! the pyramid is built, so that filtering averages linear values. Pyramids are shared between
+//! nodes that read the same file in the same colour space.
 
-use super::{Ctx, NodeDef};
-use crate::value::{Filtered, ValueType};
+use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
+use crate::gaussian::{cdf, mass, poly, poly_expectation};
+use crate::graph::Source;
+use crate::value::{Filtered, Moments, ValueType};
+use glam::{DVec2, Vec2};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex, OnceLock, Weak};
 
-pub(crate) const CATEGORIES: &[&str] = &[];
+pub(crate) const CATEGORIES: &[&str] = &["image", "tiledimage"];
 
-/// A decoded, mip-mapped image (placeholder).
-#[derive(Debug)]
-pub struct Texture;
-
-pub(crate) fn definition(_category: &str) -> Option<NodeDef> {
-    None
+/// How a texture coordinate outside [0, 1] is mapped.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Address {
+    /// The node's `default` value.
+    Constant,
+    /// The edge texel.
+    Clamp,
+    /// Repeat.
+    Periodic,
+    /// Repeat, every other copy mirrored.
+    Mirror,
 }
 
-pub(crate) fn eval(_t: &Texture, ty: ValueType, _ins: &[Filtered], _ctx: &mut Ctx) -> Filtered {
-    Filtered::zero(ty)
+impl Address {
+    fn parse(s: &str) -> Result<Address, String> {
+        Ok(match s {
+            "" | "periodic" => Address::Periodic,
+            "constant" => Address::Constant,
+            "clamp" => Address::Clamp,
+            "mirror" => Address::Mirror,
+            _ => return Err(format!("unknown address mode `{s}`")),
+        })
+    }
+
+    /// Maps integer texel `i` of a row of `n` texels into range (`None`: outside, constant).
+    #[inline]
+    fn texel(self, i: i64, n: i64) -> Option<usize> {
+        Some(match self {
+            Address::Constant | Address::Clamp => i.clamp(0, n - 1) as usize,
+            Address::Periodic => i.rem_euclid(n) as usize,
+            Address::Mirror => {
+                let k = i.rem_euclid(2 * n);
+                (if k < n { k } else { 2 * n - 1 - k }) as usize
+            }
+        })
+    }
+}
+
+/// One mip level: RGBA texels, row 0 at `v = 0` (the bottom of the file).
+#[derive(Debug)]
+struct Level {
+    w: usize,
+    h: usize,
+    px: Vec<[f32; 4]>,
+    sq: Vec<[f32; 4]>,
+}
+
+/// A decoded image and its mip pyramid.
+#[derive(Debug)]
+pub struct Pyramid {
+    levels: Vec<Level>,
+    /// Channels in the file (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA).
+    channels: usize,
+}
+
+/// A texture as an `image` node reads it: the shared pyramid and the address modes.
+#[derive(Debug)]
+pub struct Texture {
+    pyramid: Arc<Pyramid>,
+    u: Address,
+    v: Address,
+    tiled: bool,
+}
+
+fn srgb_to_linear(c: f32) -> f32 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Box weights of the source texels covering target texel `t` when `n` texels shrink to `m`:
+/// the exact overlaps of `[t·n/m, (t+1)·n/m)` (mean-preserving for odd sizes too).
+fn box_weights(t: usize, n: usize, m: usize) -> Vec<(usize, f32)> {
+    let r = n as f64 / m as f64;
+    let (lo, hi) = (t as f64 * r, (t + 1) as f64 * r);
+    let mut w = Vec::new();
+    let mut i = lo.floor() as usize;
+    while (i as f64) < hi && i < n {
+        let ov = (hi.min(i as f64 + 1.0) - lo.max(i as f64)).max(0.0);
+        if ov > 0.0 {
+            w.push((i, (ov / r) as f32));
+        }
+        i += 1;
+    }
+    w
+}
+
+fn downsample(l: &Level) -> Level {
+    let (w, h) = ((l.w / 2).max(1), (l.h / 2).max(1));
+    let mut px = vec![[0.0f32; 4]; w * h];
+    let mut sq = vec![[0.0f32; 4]; w * h];
+    let wx: Vec<_> = (0..w).map(|x| box_weights(x, l.w, w)).collect();
+    let wy: Vec<_> = (0..h).map(|y| box_weights(y, l.h, h)).collect();
+    for y in 0..h {
+        for x in 0..w {
+            let (mut a, mut b) = ([0.0f32; 4], [0.0f32; 4]);
+            for &(sy, ky) in &wy[y] {
+                for &(sx, kx) in &wx[x] {
+                    let i = sy * l.w + sx;
+                    let k = kx * ky;
+                    for c in 0..4 {
+                        a[c] += k * l.px[i][c];
+                        b[c] += k * l.sq[i][c];
+                    }
+                }
+            }
+            px[y * w + x] = a;
+            sq[y * w + x] = b;
+        }
+    }
+    Level { w, h, px, sq }
+}
+
+fn load(path: &Path, srgb: bool) -> Result<Pyramid, String> {
+    let img = ::image::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let channels = img.color().channel_count() as usize;
+    let rgba = img.to_rgba32f();
+    let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+    if w == 0 || h == 0 {
+        return Err(format!("{}: empty image", path.display()));
+    }
+    let mut px = vec![[0.0f32; 4]; w * h];
+    for (x, y, p) in rgba.enumerate_pixels() {
+        let mut c = p.0;
+        if srgb {
+            for v in c.iter_mut().take(3) {
+                *v = srgb_to_linear(*v);
+            }
+        }
+        // Row 0 of the file is the top: store it at the end (v = 1).
+        px[(h - 1 - y as usize) * w + x as usize] = c;
+    }
+    let sq = px.iter().map(|c| c.map(|v| v * v)).collect();
+    let mut levels = vec![Level { w, h, px, sq }];
+    while levels.last().is_some_and(|l| l.w > 1 || l.h > 1) {
+        let next = downsample(levels.last().unwrap());
+        levels.push(next);
+    }
+    Ok(Pyramid { levels, channels })
+}
+
+/// Loads (or reuses) the pyramid of `path` in colour space `srgb`.
+fn pyramid(path: &Path, srgb: bool) -> Result<Arc<Pyramid>, String> {
+    type Cache = Mutex<HashMap<(PathBuf, bool), Weak<Pyramid>>>;
+    static CACHE: OnceLock<Cache> = OnceLock::new();
+    let cache = CACHE.get_or_init(|| Mutex::new(HashMap::new()));
+    let key = (path.to_path_buf(), srgb);
+    if let Some(p) = cache.lock().unwrap().get(&key).and_then(|w| w.upgrade()) {
+        return Ok(p);
+    }
+    let p = Arc::new(load(path, srgb)?);
+    cache.lock().unwrap().insert(key, Arc::downgrade(&p));
+    Ok(p)
+}
+
+pub(crate) fn definition(category: &str) -> Option<NodeDef> {
+    use Def::*;
+    use InType::*;
+    let (inputs, params): (&'static [_], &'static [&'static str]) = match category {
+        "image" => (
+            &[inp!("default", Out, Zero), inp!("texcoord", V2, Uv), inp!("frameoffset", Int, Zero)],
+            &["file", "layer", "uaddressmode", "vaddressmode", "filtertype", "framerange", "frameendaction"],
+        ),
+        "tiledimage" => (
+            &[
+                inp!("default", Out, Zero),
+                inp!("texcoord", V2, Uv),
+                inp!("frameoffset", Int, Zero),
+                inp!("uvtiling", V2, Pair(1.0, 1.0)),
+                inp!("uvoffset", V2, Zero),
+                inp!("realworldimagesize", V2, Pair(1.0, 1.0)),
+                inp!("realworldtilesize", V2, Pair(1.0, 1.0)),
+            ],
+            &["file", "filtertype", "framerange", "frameendaction"],
+        ),
+        _ => return None,
+    };
+    let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
+    Some(NodeDef { category, inputs, params, types: types::float_or_vector, build })
+}
+
+fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[Param]) -> Result<Op, String> {
+    let mut file = None;
+    let (mut u, mut v) = (Address::Periodic, Address::Periodic);
+    for p in params {
+        match p {
+            Param::File { name, path, colorspace } if name == "file" => {
+                file = Some((path.clone(), colorspace == "srgb_texture"));
+            }
+            Param::Str { name, value } if name == "uaddressmode" => u = Address::parse(value)?,
+            Param::Str { name, value } if name == "vaddressmode" => v = Address::parse(value)?,
+            _ => {}
+        }
+    }
+    let Some((path, srgb)) = file else {
+        return Err("no image file".into());
+    };
+    let tiled = category == "tiledimage";
+    if tiled {
+        (u, v) = (Address::Periodic, Address::Periodic);
+    }
+    Ok(Op::Image(Arc::new(Texture { pyramid: pyramid(&path, srgb)?, u, v, tiled })))
+}
+
+/// `(texel, weight, d weight / dm)` along one axis.
+type Weights = Vec<(usize, f64, f64)>;
+
+/// Per-axis texel weights of the bilinear (tent) reconstruction averaged over `N(m, s²)`
+/// (texel units, centres at `i + ½`): `(texel, weight, d weight / dm)`, the texel already
+/// mapped by the address mode. `s = 0` gives the bilinear weights.
+fn axis_weights(m: f64, s: f64, n: usize, mode: Address, out: &mut Weights) {
+    out.clear();
+    let n = n as i64;
+    let map = |i: i64| mode.texel(i, n).unwrap_or(0);
+    if s < 1e-6 {
+        let f = m - 0.5;
+        let i0 = f.floor();
+        let a = f - i0;
+        out.push((map(i0 as i64), 1.0 - a, -1.0));
+        out.push((map(i0 as i64 + 1), a, 1.0));
+        return;
+    }
+    let lo = (m - 0.5 - 4.0 * s - 1.0).floor() as i64;
+    let hi = (m - 0.5 + 4.0 * s + 1.0).ceil() as i64;
+    let mut total = 0.0;
+    for i in lo..=hi {
+        let c = i as f64 + 0.5;
+        let left = poly_expectation(&poly(&[1.0 - c, 1.0]), c - 1.0, c, m, s);
+        let right = poly_expectation(&poly(&[1.0 + c, -1.0]), c, c + 1.0, m, s);
+        let (z0, z1, z2) = ((c - 1.0 - m) / s, (c - m) / s, (c + 1.0 - m) / s);
+        let dw = mass(z0, z1) - mass(z1, z2);
+        let w = left + right;
+        total += w;
+        out.push((map(i), w, dw));
+    }
+    // The tents sum to 1; renormalise the ±4σ truncation.
+    if total > 0.0 {
+        for e in out.iter_mut() {
+            e.1 /= total;
+        }
+    }
+}
+
+/// The Gaussian average over `N(m, diag(s²))` (uv units) of level `l`'s bilinear
+/// reconstruction: value, mean square, and d/du, d/dv, per channel.
+fn filtered_level(t: &Texture, l: &Level, m: DVec2, s: DVec2) -> [[f64; 4]; 4] {
+    thread_local! {
+        static BUF: std::cell::RefCell<(Weights, Weights)> = const { std::cell::RefCell::new((Vec::new(), Vec::new())) };
+    }
+    BUF.with(|b| {
+        let (xs, ys) = &mut *b.borrow_mut();
+        axis_weights(m.x * l.w as f64, s.x * l.w as f64, l.w, t.u, xs);
+        axis_weights(m.y * l.h as f64, s.y * l.h as f64, l.h, t.v, ys);
+        let mut r = [[0.0f64; 4]; 4];
+        for &(j, wy, dwy) in ys.iter() {
+            for &(i, wx, dwx) in xs.iter() {
+                let k = j * l.w + i;
+                let (p, q) = (l.px[k], l.sq[k]);
+                for c in 0..4 {
+                    let v = p[c] as f64;
+                    r[0][c] += wx * wy * v;
+                    r[1][c] += wx * wy * q[c] as f64;
+                    r[2][c] += dwx * wy * v * l.w as f64;
+                    r[3][c] += wx * dwy * v * l.h as f64;
+                }
+            }
+        }
+        r
+    })
+}
+
+/// Maps file channels to output channel `k` of an `n`-channel output.
+fn channel(p: &[f64; 4], file_channels: usize, k: usize) -> f64 {
+    match file_channels {
+        1 => {
+            if k < 3 {
+                p[0]
+            } else {
+                1.0
+            }
+        }
+        2 => {
+            if k < 3 {
+                p[0]
+            } else {
+                p[3]
+            }
+        }
+        _ => p[k],
+    }
+}
+
+pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let n = ty.channels();
+    let default = &ins[0];
+    // The lookup coordinate (tiledimage: an affine map of texcoord, exact).
+    let (mut scale, mut offset) = (DVec2::ONE, DVec2::ZERO);
+    if t.tiled {
+        let g = |f: &Filtered| DVec2::new(f.ch[0].mean as f64, f.ch[1].mean as f64);
+        let (tiling, off, img, tile) = (g(&ins[3]), g(&ins[4]), g(&ins[5]), g(&ins[6]));
+        scale = tiling / img * tile;
+        offset = off / img * tile;
+    }
+    let tc = &ins[1];
+    let m = DVec2::new(tc.ch[0].mean as f64, tc.ch[1].mean as f64) * scale - offset;
+    let s = DVec2::new(tc.ch[0].sigma() as f64, tc.ch[1].sigma() as f64) * scale.abs();
+    let j = [tc.ch[0].grad * scale.x as f32, tc.ch[1].grad * scale.y as f32];
+    let pyr = &t.pyramid;
+    let l0 = &pyr.levels[0];
+    // Up to 1 texel (major axis) the Gaussian average of the bilinear reconstruction is taken
+    // exactly at level 0. Beyond, at levels L and L + 1 around lod = log2(σ), where σ is 1–2
+    // texels, less the spread a level's own box and tent already add (1/4 texel²), blended
+    // linearly in lod.
+    let sigma_texels = (s.x * l0.w as f64).max(s.y * l0.h as f64);
+    let top = (pyr.levels.len() - 1) as f64;
+    let lod = if ctx.point || sigma_texels <= 1.0 { 0.0 } else { sigma_texels.log2().min(top) };
+    let (la, frac) = (lod.floor() as usize, lod - lod.floor());
+    let lb = (la + 1).min(pyr.levels.len() - 1);
+    let at = |l: usize| {
+        let lv = &pyr.levels[l];
+        let sl = if l == 0 {
+            s
+        } else {
+            // Spread left to apply, in level-l texels, mapped back to uv.
+            let k = DVec2::new(lv.w as f64, lv.h as f64);
+            let st = s * k;
+            DVec2::new((st.x * st.x - 0.25).max(0.0).sqrt(), (st.y * st.y - 0.25).max(0.0).sqrt()) / k
+        };
+        filtered_level(t, lv, m, sl)
+    };
+    let ra = at(la);
+    let r = if frac > 0.0 && lb != la {
+        let rb = at(lb);
+        std::array::from_fn::<[f64; 4], 4, _>(|q| std::array::from_fn(|c| ra[q][c] + (rb[q][c] - ra[q][c]) * frac))
+    } else {
+        ra
+    };
+    let (v, sq, dx, dy) = (r[0], r[1], r[2], r[3]);
+    ctx.work.lattice += 4;
+    // Constant address mode: the footprint's mass inside [0, 1] per constant axis.
+    let inside = |mode: Address, m: f64, s: f64| -> (f64, f64) {
+        if mode != Address::Constant {
+            return (1.0, 0.0);
+        }
+        if s <= 0.0 {
+            return (if (0.0..=1.0).contains(&m) { 1.0 } else { 0.0 }, 0.0);
+        }
+        let (a, b) = (-m / s, (1.0 - m) / s);
+        let p = cdf(b) - cdf(a);
+        (p, (crate::gaussian::pdf(a) - crate::gaussian::pdf(b)) / s)
+    };
+    let (pu, dpu) = inside(t.u, m.x, s.x);
+    let (pv, dpv) = inside(t.v, m.y, s.y);
+    let w_in = pu * pv;
+    let mut out = Filtered::zero(ty);
+    for k in 0..n {
+        let val = channel(&v, pyr.channels, k);
+        let gx = channel(&dx, pyr.channels, k);
+        let gy = channel(&dy, pyr.channels, k);
+        let gl = j[0] * gx as f32 + j[1] * gy as f32;
+        let var_lin = (gx * s.x).powi(2) + (gy * s.y).powi(2);
+        let var_pyr = channel(&sq, pyr.channels, k) - val * val;
+        let img = Moments { mean: val as f32, grad: gl, var: var_lin.max(var_pyr).max(0.0) as f32 };
+        out.ch[k] = if w_in >= 1.0 {
+            img
+        } else {
+            let d = default.at(k);
+            let wgrad = j[0] * (dpu * pv) as f32 + j[1] * (pu * dpv) as f32;
+            let w = Moments { mean: w_in as f32, grad: wgrad, var: (w_in * (1.0 - w_in)) as f32 };
+            crate::moments::mix(d, img, w, ctx.fp)
+        };
+    }
+    if ctx.point {
+        for c in out.ch.iter_mut() {
+            c.grad = Vec2::ZERO;
+            c.var = 0.0;
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{Document, EvalScratch, Footprint, LoadOptions};
+    use glam::Vec2;
+
+    /// 16-bit PNG and EXR files load, and `v = 0` is the bottom row of the file.
+    #[test]
+    fn formats_and_orientation() {
+        let dir = std::env::temp_dir().join(format!("graph-image-unit-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // File rows (top first): red, green / blue, white.
+        let rows = [[[1.0f32, 0.0, 0.0], [0.0, 1.0, 0.0]], [[0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]];
+        let png = image::ImageBuffer::<image::Rgb<u16>, _>::from_fn(2, 2, |x, y| {
+            image::Rgb(rows[y as usize][x as usize].map(|c| (c * 65535.0) as u16))
+        });
+        png.save(dir.join("t16.png")).unwrap();
+        let exr = image::Rgb32FImage::from_fn(2, 2, |x, y| image::Rgb(rows[y as usize][x as usize]));
+        exr.save(dir.join("t.exr")).unwrap();
+        for file in ["t16.png", "t.exr"] {
+            let path = dir.join(file);
+            let text = format!(
+                r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">
+                <image name="i" type="color3"><input name="file" type="filename" value="{}"/></image>
+                <output name="out" type="color3" nodename="i"/></nodegraph></materialx>"#,
+                path.display()
+            );
+            let doc = Document::parse(&text, "t.mtlx".as_ref(), &LoadOptions::default()).unwrap();
+            let g = doc.graph();
+            let out = g.output_id("g/out").unwrap();
+            let mut scratch = EvalScratch::new(g);
+            let at = |u: f32, v: f32, scratch: &mut EvalScratch| {
+                let f = g.eval_output(out, &Footprint::point(Vec2::new(u, v)), scratch);
+                [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
+            };
+            let close = |a: [f32; 3], b: [f32; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-3);
+            assert!(close(at(0.25, 0.25, &mut scratch), [0.0, 0.0, 1.0]), "{file}: bottom left");
+            assert!(close(at(0.75, 0.25, &mut scratch), [1.0, 1.0, 1.0]), "{file}: bottom right");
+            assert!(close(at(0.25, 0.75, &mut scratch), [1.0, 0.0, 0.0]), "{file}: top left");
+            assert!(close(at(0.75, 0.75, &mut scratch), [0.0, 1.0, 0.0]), "{file}: top right");
+            // A huge footprint averages the image.
+            let f = g.eval_output(out, &Footprint::isotropic(Vec2::new(0.3, 0.6), 50.0), &mut scratch);
+            assert!((f.ch[0].mean - 0.5).abs() < 1e-3 && (f.ch[2].mean - 0.5).abs() < 1e-3);
+        }
+    }
 }

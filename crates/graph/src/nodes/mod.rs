@@ -12,7 +12,9 @@ pub(crate) mod hash;
 pub(crate) mod image;
 pub(crate) mod math;
 pub(crate) mod noise;
+pub(crate) mod normal;
 pub(crate) mod pattern;
+pub(crate) mod shape;
 
 use crate::eval::Work;
 use crate::graph::Source;
@@ -198,16 +200,20 @@ pub struct NodeDef {
 pub enum Op {
     /// `texcoord`, `constant`, `place2d`, `rotate2d`, `dot`.
     Geometry(geometry::GeometryOp),
-    /// `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`.
+    /// `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`, `unifiednoise2d`.
     Noise(noise::NoiseOp),
     /// Shapes, ramps, splits, random values.
     Pattern(pattern::PatternOp),
+    /// `circle`, `line`, `hexagon`, `grid`, `crosshatch`, `tiledcircles`, `tiledhexagons`.
+    Shape(shape::ShapeOp),
     /// Math nodes.
     Math(math::MathOp),
     /// Channel nodes.
     Channel(channel::ChannelOp),
     /// Colour adjustment nodes.
     Color(color::ColorOp),
+    /// `normalmap`, `heighttonormal`.
+    Normal(normal::NormalOp),
     /// `image`, `tiledimage`.
     Image(Arc<image::Texture>),
 }
@@ -226,10 +232,12 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
         Op::Noise(n) => noise::eval(n, ty, ins, ctx),
         Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
+        Op::Shape(s) => shape::eval(s, ty, ins, ctx),
         Op::Math(m) => math::eval(m, ty, ins, ctx),
         Op::Channel(c) => channel::eval(c, ty, ins, ctx),
         Op::Color(c) => color::eval(c, ty, ins, ctx),
         Op::Image(t) => image::eval(t, ty, ins, ctx),
+        Op::Normal(n) => normal::eval(n, ty, ins, ctx),
     }
 }
 
@@ -240,10 +248,12 @@ pub fn supported() -> Vec<&'static str> {
         geometry::CATEGORIES,
         noise::CATEGORIES,
         pattern::CATEGORIES,
+        shape::CATEGORIES,
         math::CATEGORIES,
         channel::CATEGORIES,
         color::CATEGORIES,
         image::CATEGORIES,
+        normal::CATEGORIES,
     ] {
         v.extend_from_slice(f);
     }
@@ -261,10 +271,12 @@ pub fn definition(category: &str) -> Option<NodeDef> {
     geometry::definition(category)
         .or_else(|| noise::definition(category))
         .or_else(|| pattern::definition(category))
+        .or_else(|| shape::definition(category))
         .or_else(|| math::definition(category))
         .or_else(|| channel::definition(category))
         .or_else(|| color::definition(category))
         .or_else(|| image::definition(category))
+        .or_else(|| normal::definition(category))
 }
 
 /// Input names of a category (empty if unknown).

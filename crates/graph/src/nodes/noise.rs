@@ -1,4 +1,4 @@
-//! Noise: `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`.
+//! Noise: `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`, `unifiednoise2d`.
 //!
 //! | node | inputs (default) | unfiltered (MaterialX 1.39) | filtered evaluation |
 //! |---|---|---|---|
@@ -6,6 +6,7 @@
 //! | `fractal2d` | `amplitude` (1), `octaves` (3), `lacunarity` (2), `diminish` (0.5), `texcoord` (UV0) | `Σ diminishⁱ perlin(t · lacunarityⁱ) · amplitude` | each octave as `noise2d`; octaves beyond the footprint's band limit are never evaluated |
 //! | `cellnoise2d` | `texcoord` (UV0) | hash of `floor(t)` in [0, 1] | exact: cell values weighted by the footprint's mass over each cell (σ ≤ 0.5 cells); beyond, the residual around the mean 0.5 shrinks like white noise (`√(σ₀/σ)` per axis) |
 //! | `worleynoise2d` | `texcoord` (UV0), `jitter` (1), `style` (0) | distance to the nearest 1–3 jittered feature points (style 0) or the nearest point's cell value (style 1) | 3×3 (σ < 0.2 cells) or 5×5 Gauss–Hermite over the footprint up to σ = 1 cell, blended into the pattern's global mean by σ = 2, then the mean alone |
+//! | `unifiednoise2d` (float) | `texcoord` (UV0), `freq` (1,1), `offset` (0,0), `jitter` (1), `outmin` (0), `outmax` (1), `clampoutput` (true), `octaves` (3), `lacunarity` (2), `diminish` (0.5), `type` (0), `style` (0) | `p = t·freq + offset`; raw by `type`: 0 `0.5 + 0.5·perlin(rot(p))`, 1 `cellnoise(rot(p))`, 2 `worley(p, jitter, style)`, 3 `fractal3d(p.x, p.y, z)`, else 0; rotation by and slice `z = (jitter − 1)·90000` (degrees); out `outmin + raw·(outmax − outmin)`, raw clamped to [0, 1] if `clampoutput` | `p` and the rotation exactly (affine); each type as its node above; `fractal3d`'s slice `z = const` of 3D Perlin noise folds both z layers into per-corner in-plane gradients plus a constant, filtered by the same separable corner integrals (scale 0.9820); the clamp by clamped-ramp moments, the remap exactly |
 //!
 //! Perlin noise is `0.6616 Σ_c (g_c · (p − c)) W(pₓ − cₓ) W(p_y − c_y)` over lattice corners
 //! `c` with `W(d) = 1 − fade(|d|)`: each corner's kernel is separable, so for a footprint with
@@ -19,12 +20,12 @@ use super::hash::{self, cell_float, cell_vec3, ifloor};
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{self, poly, poly_deriv, poly_mul, Poly};
 use crate::graph::Source;
-use crate::moments::mul;
+use crate::moments::{add_scaled, mix, mul};
 use crate::value::{Filtered, Moments, ValueType};
 use glam::{DVec2, Vec2};
 use std::sync::OnceLock;
 
-pub(crate) const CATEGORIES: &[&str] = &["noise2d", "fractal2d", "cellnoise2d", "worleynoise2d"];
+pub(crate) const CATEGORIES: &[&str] = &["noise2d", "fractal2d", "cellnoise2d", "worleynoise2d", "unifiednoise2d"];
 
 /// Global statistics of a pattern (mean and variance of each output channel over the plane).
 #[derive(Clone, Copy, Debug, Default)]
@@ -46,6 +47,8 @@ pub enum NoiseOp {
     Cellnoise2d,
     /// `worleynoise2d`, with its statistics for its (uniform) jitter.
     Worley2d(PatternStats),
+    /// `unifiednoise2d`, with the Worley statistics for its (uniform) jitter.
+    Unified2d(PatternStats),
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -70,6 +73,23 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "worleynoise2d" => (&[inp!("texcoord", V2, Uv), inp!("jitter", Float, One), inp!("style", Int, Zero)], |t| {
             matches!(t, ValueType::Float | ValueType::Vector2 | ValueType::Vector3)
         }),
+        "unifiednoise2d" => (
+            &[
+                inp!("texcoord", V2, Uv),
+                inp!("freq", V2, Pair(1.0, 1.0)),
+                inp!("offset", V2, Zero),
+                inp!("jitter", Float, One),
+                inp!("outmin", Float, Zero),
+                inp!("outmax", Float, One),
+                inp!("clampoutput", Bool, One),
+                inp!("octaves", Int, Splat(3.0)),
+                inp!("lacunarity", Float, Splat(2.0)),
+                inp!("diminish", Float, Half),
+                inp!("type", Int, Zero),
+                inp!("style", Int, Zero),
+            ],
+            types::float,
+        ),
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
@@ -81,6 +101,13 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], _: &[P
         "noise2d" => NoiseOp::Noise2d,
         "fractal2d" => NoiseOp::Fractal2d,
         "cellnoise2d" => NoiseOp::Cellnoise2d,
+        "unifiednoise2d" => {
+            let jitter = match &srcs[3] {
+                Source::Constant(v) => v.v[0],
+                _ => 1.0,
+            };
+            NoiseOp::Unified2d(worley_stats(jitter, 1))
+        }
         _ => {
             let jitter = match &srcs[1] {
                 Source::Constant(v) => v.v[0],
@@ -120,28 +147,129 @@ fn gradient_vector(h: u32) -> DVec2 {
     }
 }
 
-/// Which bits of a corner hash choose the gradient: the whole hash (float noise) or one byte
-/// (channel `k` of vector noise).
+/// Which lattice a Perlin evaluation uses: which bits of a corner hash choose the 2D gradient
+/// (the whole hash for float noise, one byte for channel `k` of vector noise), or the slice
+/// `z = const` of MaterialX's 3D float noise (`fractal3d` inside `unifiednoise2d`).
 #[derive(Clone, Copy, Debug)]
 enum HashSel {
     Full,
     Byte(u32),
+    Slice(f32),
 }
 
 impl HashSel {
     #[inline]
     fn pick(self, h: u32) -> u32 {
         match self {
-            HashSel::Full => h,
+            HashSel::Full | HashSel::Slice(_) => h,
             HashSel::Byte(k) => (h >> (8 * k)) & 0xff,
+        }
+    }
+
+    /// The lattice's gradient scale (MaterialX `mx_gradient_scale2d` / `3d`).
+    #[inline]
+    fn scale(self) -> f64 {
+        match self {
+            HashSel::Slice(_) => GRADIENT_SCALE_3D as f64,
+            _ => GRADIENT_SCALE_2D as f64,
+        }
+    }
+
+    /// Variance of the lattice's noise over the plane (measured; a 3D slice's varies with
+    /// `z` between 0.064 and 0.077).
+    #[inline]
+    fn variance(self) -> f64 {
+        match self {
+            HashSel::Slice(_) => PERLIN3_SLICE_VARIANCE,
+            _ => PERLIN_VARIANCE,
+        }
+    }
+
+    /// Corner `(cx, cy)`'s kernel `g · (p − c) + k`: its in-plane gradient `g` and constant
+    /// `k` (a 3D slice folds both z layers, weighted by the z fade, into them). `h2` is the
+    /// corner's 2D hash.
+    #[inline]
+    fn corner(self, cx: i32, cy: i32, h2: u32) -> (DVec2, f64) {
+        match self {
+            HashSel::Slice(z) => {
+                let z0 = z.floor();
+                let fz = (z - z0) as f64;
+                let wz = fade(fz as f32) as f64;
+                let mut g = DVec2::ZERO;
+                let mut k = 0.0;
+                for (l, w) in [(0, 1.0 - wz), (1, wz)] {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let g3 = gradient3_vector(hash::hash3(cx, cy, (z0 as i32).wrapping_add(l)));
+                    g += DVec2::new(g3[0], g3[1]) * w;
+                    k += g3[2] * (fz - l as f64) * w;
+                }
+                (g, k)
+            }
+            _ => (gradient_vector(self.pick(h2)), 0.0),
         }
     }
 }
 
+/// The gradient vector of MaterialX's 3D `mx_gradient_float(hash, x, y, z)`.
+#[inline]
+fn gradient3_vector(h: u32) -> [f64; 3] {
+    let h = h & 15;
+    let mut g = [0.0; 3];
+    let u = if h < 8 { 0 } else { 1 };
+    let v = if h < 4 {
+        1
+    } else if h == 12 || h == 14 {
+        0
+    } else {
+        2
+    };
+    g[u] += if h & 1 != 0 { -1.0 } else { 1.0 };
+    g[v] += if h & 2 != 0 { -1.0 } else { 1.0 };
+    g
+}
+
+#[inline]
+fn gradient3(h: u32, x: f32, y: f32, z: f32) -> f32 {
+    let h = h & 15;
+    let u = if h < 8 { x } else { y };
+    let v = if h < 4 {
+        y
+    } else if h == 12 || h == 14 {
+        x
+    } else {
+        z
+    };
+    (if h & 1 != 0 { -u } else { u }) + (if h & 2 != 0 { -v } else { v })
+}
+
+/// MaterialX `mx_perlin_noise_float(vec3)` (f32, as GLSL computes it).
+pub fn perlin3_float(p: [f32; 3]) -> f32 {
+    let (x0, y0, z0) = (ifloor(p[0]), ifloor(p[1]), ifloor(p[2]));
+    let (fx, fy, fz) = (p[0] - x0 as f32, p[1] - y0 as f32, p[2] - z0 as f32);
+    let (u, v, w) = (fade(fx), fade(fy), fade(fz));
+    let g = |dx: i32, dy: i32, dz: i32| {
+        let h = hash::hash3(x0.wrapping_add(dx), y0.wrapping_add(dy), z0.wrapping_add(dz));
+        gradient3(h, fx - dx as f32, fy - dy as f32, fz - dz as f32)
+    };
+    let (s1, t1, r1) = (1.0 - u, 1.0 - v, 1.0 - w);
+    let r = r1 * (t1 * (g(0, 0, 0) * s1 + g(1, 0, 0) * u) + v * (g(0, 1, 0) * s1 + g(1, 1, 0) * u))
+        + w * (t1 * (g(0, 0, 1) * s1 + g(1, 0, 1) * u) + v * (g(0, 1, 1) * s1 + g(1, 1, 1) * u));
+    GRADIENT_SCALE_3D * r
+}
+
+const GRADIENT_SCALE_3D: f32 = 0.9820;
+/// Variance of a `z = const` slice of MaterialX's 3D Perlin noise over the plane (measured,
+/// averaged over `z`).
+pub const PERLIN3_SLICE_VARIANCE: f64 = 0.072;
 const GRADIENT_SCALE_2D: f32 = 0.6616;
 
 /// MaterialX `mx_perlin_noise_float(vec2)` / channel of `mx_perlin_noise_vec3(vec2)`.
 fn perlin_point(p: Vec2, sel: HashSel) -> f32 {
+    if let HashSel::Slice(z) = sel {
+        return perlin3_float([p.x, p.y, z]);
+    }
     let (x0, y0) = (ifloor(p.x), ifloor(p.y));
     let (fx, fy) = (p.x - x0 as f32, p.y - y0 as f32);
     let (u, v) = (fade(fx), fade(fy));
@@ -165,15 +293,15 @@ fn perlin_gradient(p: DVec2, sel: HashSel) -> DVec2 {
     };
     let mut g = DVec2::ZERO;
     for (cx, cy) in [(x0, y0), (x0 + 1.0, y0), (x0, y0 + 1.0), (x0 + 1.0, y0 + 1.0)] {
-        let gv = gradient_vector(sel.pick(hash::hash2(cx as i32, cy as i32)));
+        let (gv, k) = sel.corner(cx as i32, cy as i32, hash::hash2(cx as i32, cy as i32));
         let d = p - DVec2::new(cx, cy);
         let (wx, dwx) = w(d.x);
         let (wy, dwy) = w(d.y);
-        let dot = gv.dot(d);
+        let dot = gv.dot(d) + k;
         g.x += (gv.x * wx + dot * dwx) * wy;
         g.y += (gv.y * wy + dot * dwy) * wx;
     }
-    g * GRADIENT_SCALE_2D as f64
+    g * sel.scale()
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -274,17 +402,17 @@ fn perlin_exact(p: DVec2, s: DVec2, sels: &[HashSel], out: &mut [(f64, f64, f64)
         for &(cx, tx) in &xs[..nx] {
             let h = hash::hash2(cx, cy);
             for (k, sel) in sels.iter().enumerate() {
-                let g = gradient_vector(sel.pick(h));
+                let (g, c) = sel.corner(cx, cy, h);
                 let o = &mut out[k];
-                o.0 += g.x * tx.dw * ty.w + g.y * tx.w * ty.dw;
-                o.1 += g.x * tx.dw1 * ty.w + g.y * tx.w1 * ty.dw;
-                o.2 += g.x * tx.dw * ty.w1 + g.y * tx.w * ty.dw1;
+                o.0 += g.x * tx.dw * ty.w + g.y * tx.w * ty.dw + c * tx.w * ty.w;
+                o.1 += g.x * tx.dw1 * ty.w + g.y * tx.w1 * ty.dw + c * tx.w1 * ty.w;
+                o.2 += g.x * tx.dw * ty.w1 + g.y * tx.w * ty.dw1 + c * tx.w * ty.w1;
             }
         }
     }
     work.lattice += (nx * ny) as u64;
-    let k = GRADIENT_SCALE_2D as f64;
-    for o in out.iter_mut() {
+    for (o, sel) in out.iter_mut().zip(sels) {
+        let k = sel.scale();
         *o = (o.0 * k, o.1 * k, o.2 * k);
     }
 }
@@ -324,7 +452,7 @@ fn perlin_octave(
     let att = damp(s.x) * damp(s.y);
     if att < OCTAVE_CUTOFF {
         for o in out.iter_mut() {
-            *o = Moments { mean: 0.0, grad: Vec2::ZERO, var: PERLIN_VARIANCE as f32 };
+            *o = Moments { mean: 0.0, grad: Vec2::ZERO, var: sels[0].variance() as f32 };
         }
         return false;
     }
@@ -343,7 +471,7 @@ fn perlin_octave(
             r[k] = one[0];
         }
     }
-    let v_glob = PERLIN_VARIANCE * (1.0 - (-PERLIN_KAPPA * (s.x * s.x + s.y * s.y)).exp());
+    let v_glob = sels[0].variance() * (1.0 - (-PERLIN_KAPPA * (s.x * s.x + s.y * s.y)).exp());
     for k in 0..sels.len() {
         let (v, dx, dy) = (r[k].0 * att, r[k].1 * att, r[k].2 * att);
         let v_lin = dx * dx * s.x * s.x + dy * dy * s.y * s.y;
@@ -393,20 +521,28 @@ fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     out
 }
 
-fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    let amp = &ins[0];
-    let octaves = ins[1].ch[0].mean.round().max(0.0) as i32;
-    let lac = ins[2].ch[0].mean as f64;
-    let dim = ins[3].ch[0].mean as f64;
-    let (p0, s0, j) = coordinate(&ins[4]);
-    let (sels, offs, n) = channel_layout(ty, true);
+/// Sums `octaves` filtered Perlin octaves `diminishⁱ perlin((p + offset) · lacunarityⁱ)` (in
+/// noise space); `sels(f)` gives the lattices of the octave at frequency `f`.
+#[allow(clippy::too_many_arguments)]
+fn fractal_sum(
+    p0: DVec2,
+    s0: DVec2,
+    octaves: i32,
+    lac: f64,
+    dim: f64,
+    sels: impl Fn(f64) -> [HashSel; 4],
+    offs: &[DVec2; 4],
+    n: usize,
+    ctx: &mut Ctx,
+) -> [Moments; 4] {
     let mut acc = [(0.0f64, DVec2::ZERO, 0.0f64); 4];
     let (mut a, mut f) = (1.0f64, 1.0f64);
     let mut oct = [Moments::default(); 4];
     for _ in 0..octaves {
         // MaterialX offsets the coordinate before the octave loop: (t + offset) · lacunarityⁱ.
         let offs_i: [DVec2; 4] = offs.map(|o| o * f);
-        let alive = perlin_octave(p0 * f, s0 * f.abs(), &sels[..n], &offs_i[..n], &mut oct, ctx);
+        let sel = sels(f);
+        let alive = perlin_octave(p0 * f, s0 * f.abs(), &sel[..n], &offs_i[..n], &mut oct, ctx);
         for k in 0..n {
             let o = &oct[k];
             acc[k].0 += a * o.mean as f64;
@@ -426,17 +562,31 @@ fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
                 }
             }
             for a in acc.iter_mut().take(n) {
-                a.2 += rest * PERLIN_VARIANCE;
+                a.2 += rest * sel[0].variance();
             }
             break;
         }
         a *= dim;
         f *= lac;
     }
+    let mut out = [Moments::default(); 4];
+    for k in 0..n {
+        out[k] = Moments { mean: acc[k].0 as f32, grad: acc[k].1.as_vec2(), var: acc[k].2 as f32 };
+    }
+    out
+}
+
+fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let amp = &ins[0];
+    let octaves = ins[1].ch[0].mean.round().max(0.0) as i32;
+    let lac = ins[2].ch[0].mean as f64;
+    let dim = ins[3].ch[0].mean as f64;
+    let (p0, s0, j) = coordinate(&ins[4]);
+    let (sels, offs, n) = channel_layout(ty, true);
+    let sum = fractal_sum(p0, s0, octaves, lac, dim, |_| sels, &offs, n, ctx);
     let mut out = Filtered::zero(ty);
     for k in 0..n {
-        let m = Moments { mean: acc[k].0 as f32, grad: acc[k].1.as_vec2(), var: acc[k].2 as f32 };
-        out.ch[k] = mul(to_uv(&m, &j), amp.at(k), ctx.fp);
+        out.ch[k] = mul(to_uv(&sum[k], &j), amp.at(k), ctx.fp);
     }
     out
 }
@@ -658,12 +808,61 @@ fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
     out
 }
 
+/// The angle (degrees) by which `unifiednoise2d` rotates its Perlin and cell lattices, and the
+/// z of its `fractal3d` slice, per unit of `jitter − 1`.
+const UNIFIED_JITTER_SCALE: f32 = 90000.0;
+
+fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let (t, freq, off, jitter) = (&ins[0], &ins[1], &ins[2], ins[3].ch[0].mean);
+    let (outmin, outmax) = (ins[4].ch[0], ins[5].ch[0]);
+    let clamp = ins[6].ch[0].mean > 0.5;
+    let octaves = ins[7].ch[0].mean.round().max(0.0) as i32;
+    let (lac, dim) = (ins[8].ch[0].mean as f64, ins[9].ch[0].mean as f64);
+    let kind = ins[10].ch[0].mean.round() as i32;
+    // p = texcoord · freq + offset (exact: affine in the inputs).
+    let mut p = Filtered::zero(ValueType::Vector2);
+    for k in 0..2 {
+        p.ch[k] = add_scaled(mul(t.ch[k], freq.ch[k], ctx.fp), off.ch[k], 1.0, ctx.fp);
+    }
+    let spin = (jitter - 1.0) * UNIFIED_JITTER_SCALE;
+    let raw = match kind {
+        0 | 1 => {
+            let mut pr = p;
+            if spin != 0.0 {
+                let (x, y) = super::geometry::rotate(p.ch[0], p.ch[1], spin, ctx);
+                pr.ch[0] = x;
+                pr.ch[1] = y;
+            }
+            if kind == 0 {
+                let half = Filtered::constant(crate::value::Value::float(0.5));
+                noise2d(ValueType::Float, &[half, half, pr], ctx).ch[0]
+            } else {
+                cellnoise2d(ValueType::Float, &[pr], ctx).ch[0]
+            }
+        }
+        2 => worley2d(stats, ValueType::Float, &[p, ins[3], ins[11]], ctx).ch[0],
+        3 => {
+            let (p0, s0, j) = coordinate(&p);
+            let sels = |f: f64| [HashSel::Slice((spin as f64 * f) as f32); 4];
+            let sum = fractal_sum(p0, s0, octaves, lac, dim, sels, &[DVec2::ZERO; 4], 1, ctx);
+            to_uv(&sum[0], &j)
+        }
+        _ => Moments::default(),
+    };
+    // range(raw, 0, 1 → outmin, outmax), clamped to [outmin, outmax]: the clamp acts on raw.
+    let w = if clamp { super::pattern::clamp01(raw) } else { raw };
+    let mut out = Filtered::zero(ty);
+    out.ch[0] = mix(outmin, outmax, w, ctx.fp);
+    out
+}
+
 pub(crate) fn eval(op: &NoiseOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let mut out = match op {
         NoiseOp::Noise2d => noise2d(ty, ins, ctx),
         NoiseOp::Fractal2d => fractal2d(ty, ins, ctx),
         NoiseOp::Cellnoise2d => cellnoise2d(ty, ins, ctx),
         NoiseOp::Worley2d(st) => worley2d(st, ty, ins, ctx),
+        NoiseOp::Unified2d(st) => unified2d(st, ty, ins, ctx),
     };
     if ctx.point {
         for c in out.ch.iter_mut() {
@@ -712,6 +911,37 @@ mod tests {
         for &(sig, r) in &rms {
             let kappa = -(r / rms[0].1).ln() / (2.0 * (sig * sig - 0.0625));
             println!("sigma {sig}: rms {r:.5}, per-axis kappa {kappa:.2}");
+        }
+    }
+}
+
+#[cfg(test)]
+mod slice_tests {
+    use super::*;
+
+    /// The 3D slice lattice reproduces unfiltered 3D Perlin noise through the corner kernels,
+    /// and prints its variance over the plane at a few slices.
+    #[test]
+    fn perlin3_slice() {
+        for &z in &[0.0f32, 0.3, 0.5, 0.9012] {
+            let (mut s, mut s2, mut n) = (0.0f64, 0.0f64, 0.0f64);
+            for i in 0..300 {
+                for j in 0..300 {
+                    let p = Vec2::new(0.013 + i as f32 * 0.0517, 0.029 + j as f32 * 0.0491);
+                    let v = perlin3_float([p.x, p.y, z]) as f64;
+                    s += v;
+                    s2 += v * v;
+                    n += 1.0;
+                }
+            }
+            println!("z {z}: variance {:.4}", s2 / n - (s / n).powi(2));
+            // Filtered at a tiny footprint = the point value.
+            let p = DVec2::new(1.37, -2.61);
+            let mut o = [(0.0, 0.0, 0.0); 4];
+            let mut work = crate::eval::Work::default();
+            perlin_exact(p, DVec2::splat(1e-4), &[HashSel::Slice(z)], &mut o, &mut work);
+            let v = perlin3_float([p.x as f32, p.y as f32, z]) as f64;
+            assert!((o[0].0 - v).abs() < 1e-4, "z {z}: {} vs {v}", o[0].0);
         }
     }
 }

@@ -1,0 +1,736 @@
+//! Shapes (MaterialX 1.39 stdlib): `circle`, `line`, `hexagon`, `grid`, `crosshatch`,
+//! `tiledcircles`, `tiledhexagons`.
+//!
+//! Every shape is an indicator (1 inside, 0 outside), so its filtered value is the probability
+//! `P` that the footprint's Gaussian lands inside, `var = P (1 − P)`, and `grad = ∇P`.
+//!
+//! | node | inputs (default) | unfiltered (MaterialX `NG_*` graphs) | filtered evaluation |
+//! |---|---|---|---|
+//! | `circle` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.5) | 1 where `|t − center|² ≤ radius²` | disk coverage: Gauss–Legendre over the footprint's narrower axis of the closed-form Φ-mass of the disk's chord along the other |
+//! | `line` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.1), `point1` (0.25,0.25), `point2` (0.75,0.75) | 1 where the distance from `t − center` to the segment `point1–point2` is ≤ `radius` (round caps) | capsule coverage, as `circle` (the capsule's chord is the hull of its disks' and rectangle's chords) |
+//! | `hexagon` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.5) | 1 inside the regular hexagon of inradius `radius` with flat sides at `x = ±radius` (IQ's `sdHexagon` on `(|dy|, |dx|)`) | hexagon coverage, as `circle` (chords piecewise linear) |
+//! | `grid` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `thickness` (0.05), `staggered` (false) | 1 within `thickness/2` of an integer line of `t·tiling − offset` (odd rows shifted by ½ when staggered) | closed form, per axis: the Gaussian mass of the periodic bands (erf sums for σ < 0.4 cells, damped Fourier series above); `1 − (1 − P_x)(1 − P_y)` with row parity masses when staggered; exact for axis-aligned footprints |
+//! | `crosshatch` (color3) | as `grid` | 1 within `thickness` of a cell diagonal of `2·fract(t·tiling − offset) − 1` | per cell, the two diagonal strips (minus their overlap) clipped to the cell, each as `circle`; the global coverage once both per-axis σ exceed 0.6 cells (Fourier modes damped below 1e-7) |
+//! | `tiledcircles` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `size` (0.5), `staggered` (false) | disk of diameter `size` in each cell (clipped to it); staggered: rows of height √3/2 shifted by ½, disks of radius `size/2` at the triangle-lattice vertices | per cell, its disks clipped to the cell, as `circle`; the global coverage beyond 0.6 cells |
+//! | `tiledhexagons` (color3) | as `tiledcircles` | as `tiledcircles` with `hexagon`s (inradius `size/2`) | as `tiledcircles` |
+//!
+//! The coverage of a convex piece `K` under `N(m, diag(sₓ², s_y²))` (correlation ignored, like
+//! the other pattern nodes; exact for axis-aligned footprints) is
+//! `∫ φ(y; m_y, s_y) [Φ((hi(y) − mₓ)/sₓ) − Φ((lo(y) − mₓ)/sₓ)] dy` with `[lo(y), hi(y)]` the chord
+//! of `K` at height `y`, integrated over the narrower axis (20-point Gauss–Legendre on the
+//! piece's extent within ±6σ): the sharp direction is in closed form, the quadrature only sees
+//! a Gaussian-smoothed chord length. Unions are sums of disjoint pieces (inclusion–exclusion
+//! for the crosshatch's overlapping strips).
+
+use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
+use crate::gaussian::{cdf, pdf};
+use crate::graph::Source;
+use crate::value::{Filtered, Moments, ValueType};
+use glam::{DVec2, Vec2};
+use std::sync::OnceLock;
+
+pub(crate) const CATEGORIES: &[&str] =
+    &["circle", "line", "hexagon", "grid", "crosshatch", "tiledcircles", "tiledhexagons"];
+
+/// Shape operations.
+#[derive(Debug)]
+pub enum ShapeOp {
+    /// `circle`
+    Circle,
+    /// `line`
+    Line,
+    /// `hexagon`
+    Hexagon,
+    /// `grid`
+    Grid,
+    /// `crosshatch`
+    Crosshatch,
+    /// `tiledcircles`
+    TiledCircles,
+    /// `tiledhexagons`
+    TiledHexagons,
+}
+
+pub(crate) fn definition(category: &str) -> Option<NodeDef> {
+    use Def::*;
+    use InType::*;
+    let (inputs, types): (&'static [_], fn(ValueType) -> bool) = match category {
+        "circle" | "hexagon" => {
+            (&[inp!("texcoord", V2, Uv), inp!("center", V2, Zero), inp!("radius", Float, Half)], types::float)
+        }
+        "line" => (
+            &[
+                inp!("texcoord", V2, Uv),
+                inp!("center", V2, Zero),
+                inp!("radius", Float, Splat(0.1)),
+                inp!("point1", V2, Pair(0.25, 0.25)),
+                inp!("point2", V2, Pair(0.75, 0.75)),
+            ],
+            types::float,
+        ),
+        "grid" | "crosshatch" => (
+            &[
+                inp!("texcoord", V2, Uv),
+                inp!("uvtiling", V2, Pair(1.0, 1.0)),
+                inp!("uvoffset", V2, Zero),
+                inp!("thickness", Float, Splat(0.05)),
+                inp!("staggered", Bool, Zero),
+            ],
+            types::color3,
+        ),
+        "tiledcircles" | "tiledhexagons" => (
+            &[
+                inp!("texcoord", V2, Uv),
+                inp!("uvtiling", V2, Pair(1.0, 1.0)),
+                inp!("uvoffset", V2, Zero),
+                inp!("size", Float, Half),
+                inp!("staggered", Bool, Zero),
+            ],
+            types::color3,
+        ),
+        _ => return None,
+    };
+    let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
+    Some(NodeDef { category, inputs, params: &[], types, build })
+}
+
+fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param]) -> Result<Op, String> {
+    Ok(Op::Shape(match category {
+        "circle" => ShapeOp::Circle,
+        "line" => ShapeOp::Line,
+        "hexagon" => ShapeOp::Hexagon,
+        "grid" => ShapeOp::Grid,
+        "crosshatch" => ShapeOp::Crosshatch,
+        "tiledcircles" => ShapeOp::TiledCircles,
+        _ => ShapeOp::TiledHexagons,
+    }))
+}
+
+// ---------------------------------------------------------------------------------------------
+// Unfiltered shapes, as MaterialX's node graphs compute them (f32).
+
+fn v2(f: &Filtered) -> Vec2 {
+    Vec2::new(f.ch[0].mean, f.ch[1].mean)
+}
+
+/// MaterialX `modulo` (`x − y·floor(x/y)`).
+#[inline]
+fn fmod(x: f32, y: f32) -> f32 {
+    x - y * (x / y).floor()
+}
+
+fn circle_point(t: Vec2, c: Vec2, r: f32) -> f32 {
+    let d = t - c;
+    if d.dot(d) > r * r {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+fn line_point(t: Vec2, c: Vec2, r: f32, p1: Vec2, p2: Vec2) -> f32 {
+    let pa = t - c - p1;
+    let ba = p2 - p1;
+    let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
+    if pa.distance(ba * h) > r {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+fn hexagon_point(t: Vec2, c: Vec2, r: f32) -> f32 {
+    let k = Vec2::new(-0.866025, 0.5);
+    let kz = 0.57735f32;
+    let d = (t - c).abs();
+    let p = Vec2::new(d.y, d.x);
+    let p1 = p - 2.0 * k * k.dot(p).min(0.0);
+    let mk = Vec2::new(-k.x, k.y);
+    let p2 = p1 - 2.0 * mk * mk.dot(p1).min(0.0);
+    let p3 = p2 - Vec2::new(p2.x.clamp(-kz * r, kz * r), r);
+    // ifgreater(sqrt(p3.x + p3.y), 0): NaN (a negative sum) compares false.
+    if (p3.x + p3.y).sqrt() > 0.0 {
+        0.0
+    } else {
+        1.0
+    }
+}
+
+fn cell(t: Vec2, tiling: Vec2, offset: Vec2) -> Vec2 {
+    t * tiling - offset
+}
+
+fn grid_point(q: Vec2, th: f32, staggered: bool) -> f32 {
+    let size = 1.0 - th;
+    let shift = if fmod(q.y, 2.0) > 1.0 { 0.5 } else { 0.0 };
+    let x = if staggered { q.x + shift } else { q.x };
+    let ax = (fmod(x, 1.0) * 2.0 - 1.0).abs();
+    let ay = (fmod(q.y, 1.0) * 2.0 - 1.0).abs();
+    let xd = if ax > size { 0.0 } else { 1.0 };
+    let yd = if ay > size { 0.0 } else { 1.0 };
+    1.0 - f32::min(xd, yd)
+}
+
+fn crosshatch_point(q: Vec2, th: f32, staggered: bool) -> f32 {
+    let shift = if fmod(q.y, 2.0) > 1.0 { 0.5 } else { 0.0 };
+    let x = if staggered { q.x + shift } else { q.x };
+    let s = Vec2::new(fmod(x, 1.0) * 2.0 - 1.0, fmod(q.y, 1.0) * 2.0 - 1.0);
+    let a = line_point(s, Vec2::ZERO, th, Vec2::new(1.0, 1.0), Vec2::new(-1.0, -1.0));
+    let b = line_point(s, Vec2::ZERO, th, Vec2::new(-1.0, 1.0), Vec2::new(1.0, -1.0));
+    a.max(b)
+}
+
+const ROW: f32 = 0.866025;
+
+fn tiled_point(q: Vec2, size: f32, staggered: bool, hex: bool) -> f32 {
+    let shape = |t: Vec2, r: f32| if hex { hexagon_point(t, Vec2::ZERO, r) } else { circle_point(t, Vec2::ZERO, r) };
+    if !staggered {
+        let rc = Vec2::new(fmod(q.x, 1.0), fmod(q.y, 1.0)) * 2.0 - 1.0;
+        return shape(rc, size);
+    }
+    let dx = if fmod(q.y, 1.73205) > ROW { 0.5 } else { 0.0 };
+    let mx = fmod(q.x + dx, 1.0);
+    let my = fmod(q.y, ROW);
+    let h = size / 2.0;
+    let a = shape(Vec2::new(mx, my), h);
+    let b = shape(Vec2::new(1.0 - mx, my), h);
+    let c = shape(Vec2::new(mx - 0.5, ROW - my), h);
+    a.max(b).max(c)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Convex pieces and their Gaussian coverage.
+
+const SQRT3: f64 = 1.732_050_807_568_877_2;
+
+/// A convex primitive.
+#[derive(Clone, Copy, Debug)]
+enum Prim {
+    Disk {
+        c: DVec2,
+        r: f64,
+    },
+    /// Regular hexagon of inradius `r`, flat sides at `x = c.x ± r`.
+    Hex {
+        c: DVec2,
+        r: f64,
+    },
+    /// Points within `r` of the segment `a–b`.
+    Capsule {
+        a: DVec2,
+        b: DVec2,
+        r: f64,
+    },
+    Rect {
+        lo: DVec2,
+        hi: DVec2,
+    },
+    /// `|n · p − c| < w`.
+    Strip {
+        n: DVec2,
+        c: f64,
+        w: f64,
+    },
+}
+
+const EMPTY: (f64, f64) = (f64::INFINITY, f64::NEG_INFINITY);
+
+#[inline]
+fn get(p: DVec2, k: usize) -> f64 {
+    if k == 0 {
+        p.x
+    } else {
+        p.y
+    }
+}
+
+impl Prim {
+    /// The chord at coordinate `k = t` along the other axis.
+    fn chord(&self, k: usize, t: f64) -> (f64, f64) {
+        let o = 1 - k;
+        match *self {
+            Prim::Disk { c, r } => {
+                let d = t - get(c, k);
+                if d.abs() >= r {
+                    return EMPTY;
+                }
+                let h = (r * r - d * d).sqrt();
+                (get(c, o) - h, get(c, o) + h)
+            }
+            Prim::Hex { c, r } => {
+                let big = 2.0 * r / SQRT3;
+                let d = (t - get(c, k)).abs();
+                let h = if k == 0 {
+                    if d >= r {
+                        return EMPTY;
+                    }
+                    big - d / SQRT3
+                } else {
+                    if d >= big {
+                        return EMPTY;
+                    }
+                    if d <= big / 2.0 {
+                        r
+                    } else {
+                        (big - d) * SQRT3
+                    }
+                };
+                (get(c, o) - h, get(c, o) + h)
+            }
+            Prim::Capsule { a, b, r } => {
+                let ab = b - a;
+                let len = ab.length();
+                let mut lo = f64::INFINITY;
+                let mut hi = f64::NEG_INFINITY;
+                let mut add = |(l, h): (f64, f64)| {
+                    if l < h {
+                        lo = lo.min(l);
+                        hi = hi.max(h);
+                    }
+                };
+                add(Prim::Disk { c: a, r }.chord(k, t));
+                add(Prim::Disk { c: b, r }.chord(k, t));
+                if len > 0.0 {
+                    let dir = ab / len;
+                    let perp = DVec2::new(-dir.y, dir.x);
+                    let s1 = Prim::Strip { n: perp, c: perp.dot(a), w: r }.chord(k, t);
+                    let s2 = Prim::Strip { n: dir, c: dir.dot((a + b) * 0.5), w: len * 0.5 }.chord(k, t);
+                    add((s1.0.max(s2.0), s1.1.min(s2.1)));
+                }
+                (lo, hi)
+            }
+            Prim::Rect { lo, hi } => {
+                if t < get(lo, k) || t >= get(hi, k) {
+                    return EMPTY;
+                }
+                (get(lo, o), get(hi, o))
+            }
+            Prim::Strip { n, c, w } => {
+                let (nk, no) = (get(n, k), get(n, o));
+                if no.abs() < 1e-12 {
+                    return if (nk * t - c).abs() < w { (f64::NEG_INFINITY, f64::INFINITY) } else { EMPTY };
+                }
+                let a = (c - w - nk * t) / no;
+                let b = (c + w - nk * t) / no;
+                (a.min(b), a.max(b))
+            }
+        }
+    }
+
+    /// Extent along axis `k`.
+    fn extent(&self, k: usize) -> (f64, f64) {
+        match *self {
+            Prim::Disk { c, r } => (get(c, k) - r, get(c, k) + r),
+            Prim::Hex { c, r } => {
+                let e = if k == 0 { r } else { 2.0 * r / SQRT3 };
+                (get(c, k) - e, get(c, k) + e)
+            }
+            Prim::Capsule { a, b, r } => (get(a, k).min(get(b, k)) - r, get(a, k).max(get(b, k)) + r),
+            Prim::Rect { lo, hi } => (get(lo, k), get(hi, k)),
+            Prim::Strip { .. } => (f64::NEG_INFINITY, f64::INFINITY),
+        }
+    }
+}
+
+/// A convex piece: the intersection of up to three primitives, counted with a sign.
+#[derive(Clone, Copy, Debug)]
+struct Piece {
+    prims: [Option<Prim>; 3],
+    sign: f64,
+}
+
+impl Piece {
+    fn one(p: Prim) -> Piece {
+        Piece { prims: [Some(p), None, None], sign: 1.0 }
+    }
+    fn clipped(p: Prim, r: Prim) -> Piece {
+        Piece { prims: [Some(p), Some(r), None], sign: 1.0 }
+    }
+    fn chord(&self, k: usize, t: f64) -> (f64, f64) {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for p in self.prims.iter().flatten() {
+            let (a, b) = p.chord(k, t);
+            lo = lo.max(a);
+            hi = hi.min(b);
+        }
+        (lo, hi)
+    }
+    fn extent(&self, k: usize) -> (f64, f64) {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for p in self.prims.iter().flatten() {
+            let (a, b) = p.extent(k);
+            lo = lo.max(a);
+            hi = hi.min(b);
+        }
+        (lo, hi)
+    }
+}
+
+const GL_N: usize = 20;
+
+/// Gauss–Legendre nodes and weights on [−1, 1].
+fn gauss_legendre() -> &'static [(f64, f64); GL_N] {
+    static R: OnceLock<[(f64, f64); GL_N]> = OnceLock::new();
+    R.get_or_init(|| {
+        let n = GL_N;
+        let mut out = [(0.0, 0.0); GL_N];
+        for i in 0..n {
+            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            let mut dp = 1.0;
+            for _ in 0..100 {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    p0 = p1;
+                    p1 = p2;
+                }
+                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+                let dx = p1 / dp;
+                x -= dx;
+                if dx.abs() < 1e-15 {
+                    break;
+                }
+            }
+            out[i] = (x, 2.0 / ((1.0 - x * x) * dp * dp));
+        }
+        out
+    })
+}
+
+/// Φ-mass of `(lo, hi)` under `N(m, s²)` and its derivative in `m`.
+#[inline]
+fn interval(lo: f64, hi: f64, m: f64, s: f64) -> (f64, f64) {
+    if lo >= hi {
+        return (0.0, 0.0);
+    }
+    let (a, b) = ((lo - m) / s, (hi - m) / s);
+    let p = if a > 0.0 { cdf(-a) - cdf(-b) } else { cdf(b) - cdf(a) };
+    (p.max(0.0), (pdf(a) - pdf(b)) / s)
+}
+
+/// Coverage of the signed pieces under `N(m, diag(s²))`: `(P, ∂P/∂m)`.
+fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    // Integrate over the narrower axis k; closed form along the other.
+    let k = if s.x <= s.y { 0 } else { 1 };
+    let o = 1 - k;
+    let (mk, sk) = (get(m, k), get(s, k));
+    let (mo, so) = (get(m, o), get(s, o).max(1e-12));
+    let mut p = 0.0;
+    let mut g = [0.0f64; 2];
+    for pc in pieces {
+        if sk <= 0.0 {
+            let (q, dq) = interval(pc.chord(k, mk).0, pc.chord(k, mk).1, mo, so);
+            p += pc.sign * q;
+            g[o] += pc.sign * dq;
+            continue;
+        }
+        let (e0, e1) = pc.extent(k);
+        let (a, b) = (e0.max(mk - 6.0 * sk), e1.min(mk + 6.0 * sk));
+        if a >= b {
+            continue;
+        }
+        let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
+        for &(x, w) in gauss_legendre() {
+            let t = mid + half * x;
+            let z = (t - mk) / sk;
+            let wt = w * half * pdf(z) / sk;
+            let (lo, hi) = pc.chord(k, t);
+            let (q, dq) = interval(lo, hi, mo, so);
+            p += pc.sign * wt * q;
+            g[o] += pc.sign * wt * dq;
+            g[k] += pc.sign * wt * q * z / sk;
+        }
+    }
+    (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))
+}
+
+/// The footprint of a coordinate: mean, per-axis spread, Jacobian rows.
+fn coord(t: &Filtered, scale: DVec2, offset: DVec2) -> (DVec2, DVec2, [Vec2; 2]) {
+    let m = DVec2::new(t.ch[0].mean as f64, t.ch[1].mean as f64) * scale - offset;
+    let s = DVec2::new(t.ch[0].sigma() as f64, t.ch[1].sigma() as f64) * scale.abs();
+    (m, s, [t.ch[0].grad * scale.x as f32, t.ch[1].grad * scale.y as f32])
+}
+
+fn indicator(p: f64, dp: DVec2, j: &[Vec2; 2]) -> Moments {
+    Moments { mean: p as f32, grad: j[0] * dp.x as f32 + j[1] * dp.y as f32, var: (p * (1.0 - p)).max(0.0) as f32 }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Grid: closed form.
+
+/// Mass of `N(m, s²)` on `∪ₖ [k + a, k + b)` (`0 ≤ b − a ≤ 1`) and its `m`-derivative.
+fn periodic_mass(a: f64, b: f64, m: f64, s: f64) -> (f64, f64) {
+    let w = b - a;
+    if w <= 0.0 {
+        return (0.0, 0.0);
+    }
+    if w >= 1.0 {
+        return (1.0, 0.0);
+    }
+    if s <= 0.0 {
+        let f = (m - a) - (m - a).floor();
+        return (if f < w { 1.0 } else { 0.0 }, 0.0);
+    }
+    if s < 0.4 {
+        let k0 = (m - 7.0 * s - b).floor();
+        let k1 = (m + 7.0 * s - a).ceil();
+        let (mut p, mut d) = (0.0, 0.0);
+        let mut k = k0;
+        while k <= k1 {
+            let (q, dq) = interval(k + a, k + b, m, s);
+            p += q;
+            d += dq;
+            k += 1.0;
+        }
+        (p, d)
+    } else {
+        use std::f64::consts::PI;
+        let (mut p, mut d) = (w, 0.0);
+        for n in 1..=8 {
+            let nf = n as f64;
+            let att = (-2.0 * PI * PI * nf * nf * s * s).exp();
+            if att < 1e-14 {
+                break;
+            }
+            let (ta, tb) = (2.0 * PI * nf * (m - a), 2.0 * PI * nf * (m - b));
+            p += att * (ta.sin() - tb.sin()) / (PI * nf);
+            d += att * 2.0 * (ta.cos() - tb.cos());
+        }
+        (p, d)
+    }
+}
+
+fn grid(ins: &[Filtered]) -> Moments {
+    let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
+    let th = ins[3].ch[0].mean as f64;
+    let staggered = ins[4].ch[0].mean > 0.5;
+    let (m, s, j) = coord(&ins[0], tile, off);
+    // Off a line along an axis: fract ∈ [th/2, 1 − th/2].
+    let (a, b) = (th / 2.0, 1.0 - th / 2.0);
+    let (qy, dqy) = periodic_mass(a, b, m.y, s.y);
+    if !staggered {
+        let (qx, dqx) = periodic_mass(a, b, m.x, s.x);
+        let p = 1.0 - qx * qy;
+        return indicator(p, DVec2::new(-dqx * qy, -qx * dqy), &j);
+    }
+    // Rows: y mod 2 ∈ [a, b) → shift 0; y mod 2 ∈ [1 + a, 1 + b) → shift ½ (period 2).
+    let (r0, dr0) = periodic_mass(a / 2.0, b / 2.0, m.y / 2.0, s.y / 2.0);
+    let (r1, dr1) = periodic_mass((1.0 + a) / 2.0, (1.0 + b) / 2.0, m.y / 2.0, s.y / 2.0);
+    let (q0, dq0) = periodic_mass(a, b, m.x, s.x);
+    let (q1, dq1) = periodic_mass(a, b, m.x + 0.5, s.x);
+    let p = 1.0 - (r0 * q0 + r1 * q1);
+    indicator(p, DVec2::new(-(r0 * dq0 + r1 * dq1), -(dr0 * q0 + dr1 * q1) / 2.0), &j)
+}
+
+// ---------------------------------------------------------------------------------------------
+// Tiled patterns.
+
+/// Per-axis spread (cells) beyond which a tiled pattern is its coverage.
+const TILE_SIGMA_GLOBAL: f64 = 0.6;
+/// Most cells visited per axis.
+const MAX_CELLS: i64 = 48;
+
+#[derive(Clone, Copy)]
+enum Tiled {
+    Cross { th: f64, staggered: bool },
+    Shapes { size: f64, staggered: bool, hex: bool },
+}
+
+impl Tiled {
+    fn row_height(&self) -> f64 {
+        match *self {
+            Tiled::Shapes { staggered: true, .. } => ROW as f64,
+            _ => 1.0,
+        }
+    }
+
+    fn point(&self, q: Vec2) -> f32 {
+        match *self {
+            Tiled::Cross { th, staggered } => crosshatch_point(q, th as f32, staggered),
+            Tiled::Shapes { size, staggered, hex } => tiled_point(q, size as f32, staggered, hex),
+        }
+    }
+
+    /// The pieces of cell (i, j).
+    fn pieces(&self, i: i64, j: i64, out: &mut Vec<Piece>) {
+        let (fi, fj) = (i as f64, j as f64);
+        match *self {
+            Tiled::Cross { th, staggered } => {
+                let sh = if staggered && j.rem_euclid(2) == 1 { 0.5 } else { 0.0 };
+                let x0 = fi - sh;
+                let rect = Prim::Rect { lo: DVec2::new(x0, fj), hi: DVec2::new(x0 + 1.0, fj + 1.0) };
+                let w = th / std::f64::consts::SQRT_2;
+                // |sx ∓ sy| < th√2 with s = 2 (q − cell corner) − 1.
+                let d1 = Prim::Strip { n: DVec2::new(1.0, -1.0), c: x0 - fj, w };
+                let d2 = Prim::Strip { n: DVec2::new(1.0, 1.0), c: x0 + fj + 1.0, w };
+                out.push(Piece::clipped(d1, rect));
+                out.push(Piece::clipped(d2, rect));
+                out.push(Piece { prims: [Some(d1), Some(d2), Some(rect)], sign: -1.0 });
+            }
+            Tiled::Shapes { size, staggered, hex } => {
+                let shape = |c: DVec2, r: f64| if hex { Prim::Hex { c, r } } else { Prim::Disk { c, r } };
+                if !staggered {
+                    let rect = Prim::Rect { lo: DVec2::new(fi, fj), hi: DVec2::new(fi + 1.0, fj + 1.0) };
+                    out.push(Piece::clipped(shape(DVec2::new(fi + 0.5, fj + 0.5), size / 2.0), rect));
+                    return;
+                }
+                let h = ROW as f64;
+                let sh = if j.rem_euclid(2) == 1 { 0.5 } else { 0.0 };
+                let x0 = fi - sh;
+                let (y0, y1) = (fj * h, (fj + 1.0) * h);
+                let rect = Prim::Rect { lo: DVec2::new(x0, y0), hi: DVec2::new(x0 + 1.0, y1) };
+                for c in [DVec2::new(x0, y0), DVec2::new(x0 + 1.0, y0), DVec2::new(x0 + 0.5, y1)] {
+                    out.push(Piece::clipped(shape(c, size / 2.0), rect));
+                }
+            }
+        }
+    }
+
+    /// Coverage over one period (by sampling the point function).
+    fn global(&self) -> f64 {
+        let h = self.row_height() * 2.0;
+        let n = 256;
+        let mut acc = 0.0;
+        for a in 0..n {
+            for b in 0..n {
+                let q = Vec2::new((a as f32 + 0.5) / n as f32 * 2.0, (b as f32 + 0.5) / n as f32 * h as f32);
+                acc += self.point(q) as f64;
+            }
+        }
+        acc / (n * n) as f64
+    }
+}
+
+fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
+    let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
+    let (m, s, j) = coord(&ins[0], tile, off);
+    if s.x.min(s.y / pat.row_height()) > TILE_SIGMA_GLOBAL {
+        let c = pat.global();
+        return Moments { mean: c as f32, grad: Vec2::ZERO, var: (c * (1.0 - c)) as f32 };
+    }
+    let h = pat.row_height();
+    let span = |m: f64, s: f64, unit: f64| {
+        let lo = ((m - 6.0 * s) / unit).floor() as i64 - 1;
+        let hi = ((m + 6.0 * s) / unit).floor() as i64 + 1;
+        let c = (m / unit).floor() as i64;
+        (lo.max(c - MAX_CELLS / 2), hi.min(c + MAX_CELLS / 2))
+    };
+    let (i0, i1) = span(m.x, s.x, 1.0);
+    let (j0, j1) = span(m.y, s.y, h);
+    let mut pieces = Vec::new();
+    let (mut p, mut g) = (0.0, DVec2::ZERO);
+    for jj in j0..=j1 {
+        for ii in i0..=i1 {
+            pieces.clear();
+            pat.pieces(ii, jj, &mut pieces);
+            let (q, dq) = coverage(&pieces, m, s);
+            p += q;
+            g += dq;
+            ctx.work.lattice += 1;
+        }
+    }
+    indicator(p.clamp(0.0, 1.0), g, &j)
+}
+
+// ---------------------------------------------------------------------------------------------
+
+pub(crate) fn eval(op: &ShapeOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let t = v2(&ins[0]);
+    let f = |x: f32| x as f64;
+    let th = ins.get(3).map(|v| v.ch[0].mean).unwrap_or(0.0);
+    let staggered = ins.get(4).is_some_and(|v| v.ch[0].mean > 0.5);
+    let tiled_pat = match op {
+        ShapeOp::Crosshatch => Some(Tiled::Cross { th: f(th), staggered }),
+        ShapeOp::TiledCircles => Some(Tiled::Shapes { size: f(th), staggered, hex: false }),
+        ShapeOp::TiledHexagons => Some(Tiled::Shapes { size: f(th), staggered, hex: true }),
+        _ => None,
+    };
+    let m = if ctx.point {
+        let v = match op {
+            ShapeOp::Circle => circle_point(t, v2(&ins[1]), ins[2].ch[0].mean),
+            ShapeOp::Hexagon => hexagon_point(t, v2(&ins[1]), ins[2].ch[0].mean),
+            ShapeOp::Line => line_point(t, v2(&ins[1]), ins[2].ch[0].mean, v2(&ins[3]), v2(&ins[4])),
+            ShapeOp::Grid => grid_point(cell(t, v2(&ins[1]), v2(&ins[2])), th, staggered),
+            _ => tiled_pat.unwrap().point(cell(t, v2(&ins[1]), v2(&ins[2]))),
+        };
+        Moments::constant(v)
+    } else {
+        match op {
+            ShapeOp::Grid => grid(ins),
+            ShapeOp::Circle | ShapeOp::Hexagon | ShapeOp::Line => {
+                let c = v2(&ins[1]).as_dvec2();
+                let r = f(ins[2].ch[0].mean);
+                let (m, s, j) = coord(&ins[0], DVec2::ONE, DVec2::ZERO);
+                let prim = match op {
+                    ShapeOp::Circle => Prim::Disk { c, r: r.abs() },
+                    ShapeOp::Hexagon => Prim::Hex { c, r },
+                    _ => Prim::Capsule { a: v2(&ins[3]).as_dvec2() + c, b: v2(&ins[4]).as_dvec2() + c, r },
+                };
+                // A circle only sees r²; the hexagon and the capsule are empty for r ≤ 0.
+                let live = if matches!(op, ShapeOp::Circle) { r != 0.0 } else { r > 0.0 };
+                let (p, dp) = if live { coverage(&[Piece::one(prim)], m, s) } else { (0.0, DVec2::ZERO) };
+                ctx.work.lattice += 1;
+                indicator(p, dp, &j)
+            }
+            _ => tiled(tiled_pat.unwrap(), ins, ctx),
+        }
+    };
+    let mut out = Filtered::zero(ty);
+    for k in 0..ty.channels() {
+        out.ch[k] = m;
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The pieces reproduce the point functions (at a point footprint the coverage is the
+    /// indicator) away from edges.
+    #[test]
+    fn pieces_match_points() {
+        let s = DVec2::splat(1e-7);
+        let mut bad = 0;
+        let mut n = 0;
+        for a in 0..60 {
+            for b in 0..60 {
+                let q = Vec2::new(-1.3 + a as f32 * 0.0613, -1.1 + b as f32 * 0.0571);
+                let m = q.as_dvec2();
+                let c = Vec2::new(0.2, -0.1);
+                let pc = coverage(&[Piece::one(Prim::Disk { c: c.as_dvec2(), r: 0.7 })], m, s).0;
+                bad += ((pc - circle_point(q, c, 0.7) as f64).abs() > 0.5) as i32;
+                let ph = coverage(&[Piece::one(Prim::Hex { c: c.as_dvec2(), r: 0.6 })], m, s).0;
+                bad += ((ph - hexagon_point(q, c, 0.6) as f64).abs() > 0.5) as i32;
+                let (p1, p2) = (Vec2::new(-0.5, 0.3), Vec2::new(0.6, -0.4));
+                let cap = Prim::Capsule { a: (p1 + c).as_dvec2(), b: (p2 + c).as_dvec2(), r: 0.2 };
+                let pl = coverage(&[Piece::one(cap)], m, s).0;
+                bad += ((pl - line_point(q, c, 0.2, p1, p2) as f64).abs() > 0.5) as i32;
+                for pat in [
+                    Tiled::Cross { th: 0.1, staggered: false },
+                    Tiled::Cross { th: 0.1, staggered: true },
+                    Tiled::Shapes { size: 0.7, staggered: false, hex: false },
+                    Tiled::Shapes { size: 0.7, staggered: true, hex: false },
+                    Tiled::Shapes { size: 0.7, staggered: false, hex: true },
+                    Tiled::Shapes { size: 0.9, staggered: true, hex: true },
+                ] {
+                    let h = pat.row_height();
+                    let (i, j) = ((m.x).floor() as i64, (m.y / h).floor() as i64);
+                    let mut pieces = Vec::new();
+                    let mut p = 0.0;
+                    for jj in j - 1..=j + 1 {
+                        for ii in i - 1..=i + 1 {
+                            pieces.clear();
+                            pat.pieces(ii, jj, &mut pieces);
+                            p += coverage(&pieces, m, s).0;
+                        }
+                    }
+                    bad += ((p - pat.point(q) as f64).abs() > 0.5) as i32;
+                    n += 1;
+                }
+                n += 3;
+            }
+        }
+        assert!(bad <= n / 500, "{bad} of {n} points disagree");
+    }
+}
