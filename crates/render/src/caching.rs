@@ -240,7 +240,10 @@ impl NodeCache {
             textures.push(per_node);
         }
         let baked = matches!(strategy, Strategy::Bake(_));
-        let nc = NodeCache { cache, textures, filter: Filter::anisotropic(8.0), baked };
+        // Trilinear, not anisotropic probes: on the demo scenes the probes filled 8× more texels
+        // (finer levels along grazing footprints) and made caching slower than evaluating;
+        // trilinear blurs elongated footprints along their minor axis instead.
+        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked };
         if baked {
             nc.bake(graphs, &rects)?;
         }
