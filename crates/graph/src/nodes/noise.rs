@@ -645,7 +645,7 @@ fn cellnoise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let se = s.min(DVec2::splat(CELL_SIGMA_EXACT));
     // Per-axis cell masses and their derivatives with respect to the mean.
     let axis = |m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]| -> usize {
-        if !(s > 1e-12) {
+        if s.is_nan() || s <= 1e-12 {
             // No spread along this axis (e.g. a constant coordinate channel): one cell, all mass.
             buf[0] = (m.floor() as i32, 1.0, 0.0);
             return 1;
