@@ -345,17 +345,7 @@ impl StandardSurface {
         let reflect = cos_i * cos_o > 0.0;
         let eta = self.params.specular_ior;
         let eta_rel = if inc.outside { eta } else { 1.0 / eta };
-        let h = if reflect { wi + wo } else { wi + wo * eta_rel };
-        let len2 = h.length_squared();
-        if !(len2.is_finite() && len2 > 1e-12) {
-            return ZERO;
-        }
-        let m = h * (len2.sqrt().recip().copysign(h.z));
-        let wi_m = wi.dot(m);
-        let wo_m = wo.dot(m);
-        if wi_m * cos_i <= 0.0 || wo_m * cos_o <= 0.0 {
-            return ZERO;
-        }
+        let Some((m, wi_m, wo_m)) = super::microfacet::half_vector(wi, wo, eta_rel) else { return ZERO };
         let md = &self.distribution;
         let d = md.d(m);
         if d <= 0.0 {
