@@ -275,12 +275,46 @@ fn run_render(args: RenderArgs) -> Result<()> {
                     "texels_filled": t.texels_filled,
                     "evictions": t.evictions,
                     "refills": t.refills,
+                    "nodes": cache_nodes_json(nc, &scene, &st),
                 })
             }),
         });
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     Ok(())
+}
+
+/// Per cached node (textures are added in the order of the names) and per level it used: the
+/// cache's counters.
+fn cache_nodes_json(nc: &NodeCache, scene: &Scene, st: &cache::CacheStats) -> serde_json::Value {
+    let nodes: Vec<serde_json::Value> = nc
+        .cached_node_names(&scene.graphs)
+        .iter()
+        .zip(&st.textures)
+        .map(|(name, tex)| {
+            let levels: Vec<serde_json::Value> = tex
+                .levels
+                .iter()
+                .enumerate()
+                .filter(|(_, l)| l.requests + l.misses + l.fills > 0)
+                .map(|(i, l)| {
+                    json!({
+                        "level": i,
+                        "requests": l.requests,
+                        "hits": l.hits,
+                        "misses": l.misses,
+                        "fills": l.fills,
+                        "texels_filled": l.texels_filled,
+                        "evictions": l.evictions,
+                        "refills": l.refills,
+                        "peak_bytes": l.peak_bytes,
+                    })
+                })
+                .collect();
+            json!({ "name": name, "lookups": tex.lookups, "levels": levels })
+        })
+        .collect();
+    serde_json::Value::Array(nodes)
 }
 
 /// Per graph: its document and, per node, the filtered evaluations the render made.

@@ -197,6 +197,12 @@ fn strategies_from_the_command_line() {
     assert!(cache["lookups"].as_u64().unwrap() > 0 && cache["tiles_filled"].as_u64().unwrap() > 0);
     assert!(cache["peak_bytes"].as_u64().unwrap() <= 8 << 20);
     assert!(!cache["cached_nodes"].as_array().unwrap().is_empty());
+    // Per-node, per-level statistics add up to the totals.
+    let nodes = cache["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), cache["cached_nodes"].as_array().unwrap().len());
+    let fills: u64 =
+        nodes.iter().flat_map(|n| n["levels"].as_array().unwrap().iter()).map(|l| l["fills"].as_u64().unwrap()).sum();
+    assert_eq!(fills, cache["tiles_filled"].as_u64().unwrap());
     expect_failure(&["render", "-D", "res=8", "--strategy", "nodes:nope"], &dir, &["nope"]);
     expect_failure(&["render", "-D", "res=8", "--strategy", "sometimes"], &dir, &["strategy"]);
     expect_failure(&["render", "-D", "res=8", "--strategy", "all", "--budget-mb", "0"], &dir, &["budget"]);
