@@ -333,6 +333,7 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
                         "category": g.node_category(id),
                         "evaluations": st.evaluations.get(id.0 as usize).copied().unwrap_or(0),
                         "lookups": st.lookups.get(id.0 as usize).copied().unwrap_or(0),
+                        "estimated_s": st.estimated_seconds(id.0 as usize),
                     })
                 })
                 .collect();
