@@ -440,6 +440,12 @@ pub fn radiance<O: PathObserver>(
             shade.evaluate(&scene.graphs, material, &graph::Footprint::new(si.uv, cov))
         };
         let bsdf = material.bsdf.at(&ShadeContext { uv: si.uv, outputs });
+        // A graph-driven shading normal bends the frame the BSDF is evaluated in.
+        let mut si = si;
+        if let Some(slot) = material.normal_slot {
+            let f = &outputs[slot as usize];
+            si.sh = crate::shading::perturbed_frame(&si.sh, Vec3::new(f.ch[0].mean, f.ch[1].mean, f.ch[2].mean));
+        }
         let wi = si.sh.to_local(-ray.d);
 
         // Next-event estimation.

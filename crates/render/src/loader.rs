@@ -65,6 +65,8 @@ struct Builder {
     pending_outputs: Vec<(u32, graph::OutputId)>,
     /// Files supplied in memory, by the name the scene refers to them with.
     embedded: HashMap<String, String>,
+    /// The graph-output slot of the material being built's shading normal, if any.
+    pending_normal: Option<u32>,
     /// Materials already built, keyed by the address of their XML object (shared `<ref>`s).
     material_ids: HashMap<*const Object, u32>,
     emitters: Vec<Emitter>,
@@ -107,6 +109,7 @@ impl Builder {
             documents: HashMap::new(),
             pending_outputs: Vec::new(),
             embedded: HashMap::new(),
+            pending_normal: None,
             material_ids: HashMap::new(),
             emitters: Vec::new(),
             bitmaps: HashMap::new(),
@@ -536,6 +539,7 @@ impl Builder {
             return Ok(i);
         }
         self.pending_outputs.clear();
+        self.pending_normal = None;
         let desc = self.bsdf(obj)?;
         let material = self.finish_material(desc);
         let i = self.materials.len() as u32;
@@ -657,7 +661,8 @@ impl Builder {
             graphs.push(MaterialGraph { graph: g, plan, slots });
         }
         self.pending_outputs.clear();
-        let mut m = Material { bsdf, graphs, slot_count, constant_outputs: Vec::new() };
+        let normal_slot = self.pending_normal.take();
+        let mut m = Material { bsdf, graphs, slot_count, constant_outputs: Vec::new(), normal_slot };
         m.compute_constant_outputs(&self.graphs);
         m
     }
@@ -712,12 +717,16 @@ impl Builder {
                 ignored.push("opacity");
             }
         }
-        if let Some(graph::MaterialSource::Output(_)) = binding.get("normal") {
-            ignored.push("normal");
+        if let Some(graph::MaterialSource::Output(out)) = binding.get("normal") {
+            let g_out = *out;
+            match self.graph_texture(obj, g, g_out, false)? {
+                Texture::GraphOutput { slot, scalar: false } => self.pending_normal = Some(slot),
+                _ => return Err(obj.error(format!("material '{name}': its normal input must be a vector3 output"))),
+            }
         }
         if !ignored.is_empty() {
             eprintln!(
-                "warning: {}: material '{name}' sets {} which tessera does not render yet; rendered as opaque with the geometric shading normal",
+                "warning: {}: material '{name}' sets {} which tessera does not render yet; rendered as opaque",
                 obj.loc,
                 ignored.join(" and ")
             );

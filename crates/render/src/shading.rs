@@ -49,6 +49,9 @@ pub struct Material {
     /// Each slot's value averaged over the whole texture (the graph evaluated with a huge
     /// footprint): what the free-texture lower bound renders with.
     pub constant_outputs: Vec<Filtered>,
+    /// The slot holding a shading normal (MaterialX `normal` input, e.g. from `normalmap`),
+    /// read in the shading frame: (x, y, z) = tangent, bitangent and normal components.
+    pub normal_slot: Option<u32>,
 }
 
 impl Material {
@@ -75,7 +78,7 @@ impl Material {
 
     /// A material without procedural textures.
     pub fn plain(bsdf: BsdfDesc) -> Self {
-        Material { bsdf, graphs: Vec::new(), slot_count: 0, constant_outputs: Vec::new() }
+        Material { bsdf, graphs: Vec::new(), slot_count: 0, constant_outputs: Vec::new(), normal_slot: None }
     }
 }
 
@@ -144,4 +147,16 @@ impl<'a> ShadeScratch<'a> {
             }
         }
     }
+}
+
+/// The shading frame bent to the normal `n_ts` given in the frame's own coordinates (a graph's
+/// `normal` output, as `normalmap` produces with its default flat frame). Normals that are not
+/// finite or lie (nearly) below the surface leave the frame as it is.
+pub fn perturbed_frame(frame: &crate::math::Frame, n_ts: glam::Vec3) -> crate::math::Frame {
+    let n = frame.to_world(n_ts);
+    let len = n.length();
+    if !(len.is_finite() && len > 1e-6) || n.dot(frame.n) < 0.05 * len {
+        return *frame;
+    }
+    crate::math::Frame::from_normal_tangent(n / len, frame.s)
 }

@@ -166,3 +166,38 @@ fn demo_wood_floor_at_four_spp_beats_point_sampling() {
     assert!(m_filtered < 0.6 * m_point && e_filtered < 0.6 * e_point);
     assert!(m_auto < 0.5 * m_point);
 }
+
+#[test]
+fn graph_normal_bends_the_shading_frame() {
+    // A white Lambertian plane (standard_surface with specular 0) whose `normal` comes from a
+    // constant normalmap, under a directional light: every pixel is E/π · max(0, n'·l), with n'
+    // the graph's normal in the plane's shading frame (tangent +x, bitangent +y, normal +z).
+    let l = glam::Vec3::new(-0.5, 0.2, 1.0).normalize();
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+        <sensor type="perspective"><float name="fov" value="30"/>
+            <transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/><rfilter type="box"/></film>
+        </sensor>
+        <shape type="rectangle"><transform name="to_world"><scale value="10"/></transform>
+            <bsdf type="mtlx"><string name="filename" value="tilted_normal.mtlx"/><string name="material" value="M_tilted"/></bsdf>
+        </shape>
+        <emitter type="directional"><vector name="direction" x="{}" y="{}" z="{}"/><rgb name="irradiance" value="2"/></emitter>
+    </scene>"#,
+        -l.x, -l.y, -l.z
+    );
+    let scene = load(&xml);
+    let doc = graph::Document::load(data().join("tilted_normal.mtlx")).unwrap();
+    let g = doc.graph();
+    let out = g.output_id("NG_n/out_normal").unwrap();
+    let n = g.eval_output(out, &graph::Footprint::point(glam::Vec2::splat(0.5)), &mut graph::EvalScratch::new(g));
+    let n = glam::Vec3::new(n.ch[0].mean, n.ch[1].mean, n.ch[2].mean).normalize();
+    assert!(n.z < 0.99, "the test needs a tilted normal, got {n}");
+    let expected = 2.0 / std::f32::consts::PI * n.dot(l).max(0.0);
+    let flat = 2.0 / std::f32::consts::PI * l.z;
+    let img = render(&scene, RenderSettings::new(4, 1), &|_| {}).image;
+    for p in &img.pixels {
+        assert!((p.x - expected).abs() < 2e-3 * expected, "{} vs {expected} (unbent: {flat})", p.x);
+    }
+}
