@@ -137,6 +137,65 @@ fn split(s: f64) -> (i64, f32) {
     (i, (s - i as f64) as f32)
 }
 
+/// The lower texel and fractions of a bilinear tap at `uv` on a level of density `d`.
+#[inline]
+fn tap_texel(d: f64, uv: Vec2) -> ((i64, f32), (i64, f32)) {
+    (split(f64::from(uv.x) * d), split(f64::from(uv.y) * d))
+}
+
+/// The tile holding texel `(i0, j0)` (power-of-two tiles: arithmetic shifts floor negative
+/// coordinates too).
+#[inline]
+fn tap_tile(i0: i64, j0: i64, tile_size: u32) -> (i64, i64) {
+    let shift = tile_size.trailing_zeros();
+    (i0 >> shift, j0 >> shift)
+}
+
+/// A tile of a texture: its level and signed tile coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct TileRef {
+    /// The level.
+    pub level: u8,
+    /// Tile column.
+    pub x: i32,
+    /// Tile row.
+    pub y: i32,
+}
+
+/// The tiles a trilinear lookup reads (see [`trilinear_taps`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrilinearTaps {
+    /// The continuous level, clamped to the texture's levels.
+    pub lod: f32,
+    /// The tile of the finer level `⌊lod⌋`.
+    pub lower: TileRef,
+    /// The tile of level `⌊lod⌋ + 1` when the lookup blends it in (fractional `lod` below the
+    /// coarsest level).
+    pub upper: Option<TileRef>,
+}
+
+/// The tiles that [`TileCache::lookup`] with [`Filter::TRILINEAR`] reads for a footprint
+/// `(uv, cov_uv)` on a texture `desc` with tiles of `tile_size` texels: the same arithmetic as
+/// the lookup, for profilers and models that predict which tiles a render touches.
+pub fn trilinear_taps(desc: &TextureDesc, tile_size: u32, uv: Vec2, cov_uv: Mat2) -> TrilinearTaps {
+    let hi = desc.max_level;
+    let lod = level_for(cov_uv, desc.texels_per_uv).clamp(0.0, f32::from(hi));
+    let l0 = lod as u8;
+    let tile_at = |level: u8| {
+        let ((i0, _), (j0, _)) = tap_texel(tile::level_density(desc, level), uv);
+        let (x, y) = tap_tile(i0, j0, tile_size);
+        TileRef { level, x: x as i32, y: y as i32 }
+    };
+    let upper = (lod - f32::from(l0) > 0.0 && l0 < hi).then(|| tile_at(l0 + 1));
+    TrilinearTaps { lod, lower: tile_at(l0), upper }
+}
+
+/// Bytes one tile of `desc` is charged against the budget with tiles of `tile_size` texels
+/// (what [`TileCache::tile_bytes`] returns for such a texture).
+pub fn tile_bytes_for(desc: &TextureDesc, tile_size: u32) -> usize {
+    tile::tile_bytes(desc, tile_size)
+}
+
 /// Removes the fill's placeholder and fails its flight if the fill does not complete (a panic).
 struct FillGuard<'a> {
     cache: &'a TileCache,
@@ -315,11 +374,9 @@ impl TileCache {
         F: Fn(TexelRequest) -> Texel + ?Sized,
     {
         let d = t.density[usize::from(level)];
-        let (i0, fx) = split(f64::from(uv.x) * d);
-        let (j0, fy) = split(f64::from(uv.y) * d);
-        // Power-of-two tiles: arithmetic shifts floor negative coordinates too.
-        let (shift, mask) = (self.config.tile_size.trailing_zeros(), i64::from(self.config.tile_size) - 1);
-        let (tx, ty) = (i0 >> shift, j0 >> shift);
+        let ((i0, fx), (j0, fy)) = tap_texel(d, uv);
+        let mask = i64::from(self.config.tile_size) - 1;
+        let (tx, ty) = tap_tile(i0, j0, self.config.tile_size);
         let (lx, ly) = ((i0 & mask) as usize, (j0 & mask) as usize);
         let key = Key { tex: tex.0, level, x: tx as i32, y: ty as i32 };
         if self.config.count_requests {

@@ -51,7 +51,7 @@ mod tile;
 
 use glam::{Mat2, Vec2};
 
-pub use cache::TileCache;
+pub use cache::{tile_bytes_for, trilinear_taps, TileCache, TileRef, TrilinearTaps};
 pub use lod::{level_for, LOD_MAX, LOD_MIN};
 pub use stats::{CacheStats, LevelStats, TextureStats};
 

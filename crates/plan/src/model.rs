@@ -1,0 +1,413 @@
+//! The statistical model: from a [`Profile`], predict what a final render with a given set of
+//! cached nodes will cost — per node evaluations, cache lookups, tiles filled, bytes and time.
+//!
+//! The model follows the evaluator's semantics exactly (see `docs/selective-caching.md`):
+//!
+//! - **Renderer requests.** Each stream's requests (scaled from the profile's samples to the
+//!   target's) walk the graph from the stream's outputs. A node that is cached and serves the
+//!   request's level answers with one lookup and cuts off its inputs; any other node is
+//!   evaluated once and its inputs are visited. Requests finer than level 0, or finer than a
+//!   node's `min_level`, are not served by the cache.
+//! - **Tiles.** The tiles a cached node's lookups read at level ℓ are the profile's recorded
+//!   taps (the finer taps of requests on level ℓ, the coarser taps of requests on ℓ − 1),
+//!   extrapolated to the target's number of draws by [`crate::richness::extrapolate`].
+//! - **Fills and nesting.** Filling a tile at level ℓ evaluates the node at its `(T + 1)²`
+//!   texels, each a request to the node's inputs at exactly level ℓ. Those requests walk the
+//!   graph like the renderer's; a cached input reads, for the tiles `(x, y)` of its consumer, the
+//!   tiles `(x, y)`, `(x + 1, y)`, `(x, y + 1)`, `(x + 1, y + 1)` of the same level (the border
+//!   texels fall in the neighbours), so its tile set is the consumer's dilated by one tile.
+//!   Cached nodes are processed from the outputs upstream, so every consumer's tiles are known
+//!   before its inputs'.
+//! - **Time.** Thread-seconds are the profile's per-sample time outside textures, plus each
+//!   evaluation at the node's measured cost for its level, plus lookups and filled texels at the
+//!   machine's measured costs; wall time divides by the threads.
+//! - **Memory.** The bytes of every tile filled: the working set, which a budget must hold for
+//!   the prediction (no evictions, no refills) to apply.
+//!
+//! A tile set is kept symbolically, per level, as one dilation depth and tap variant per
+//! stream; unions across streams are counted exactly on the observed tiles (memoised), and each
+//! stream adds its extrapolated unseen tiles scaled by the dilation's growth.
+
+use std::cell::RefCell;
+use std::collections::{BTreeMap, HashMap, HashSet};
+
+use crate::error::{PlanError, Result};
+use crate::profile::{Profile, FINER_THAN_LEVEL0};
+use crate::richness;
+
+/// The final render a prediction is for.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    /// Camera samples (pixels × samples per pixel).
+    pub samples: u64,
+    /// Worker threads.
+    pub threads: u32,
+}
+
+/// Which nodes are cached: per graph, per node, `Some(min_level)` when the node is cached for
+/// requests on level `min_level` or coarser (finer requests evaluate it directly).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub struct PlanSpec {
+    /// Per graph, per node.
+    pub cached: Vec<Vec<Option<u8>>>,
+}
+
+impl PlanSpec {
+    /// Nothing cached.
+    pub fn none(profile: &Profile) -> PlanSpec {
+        PlanSpec { cached: profile.graphs.iter().map(|g| vec![None; g.nodes.len()]).collect() }
+    }
+
+    /// Every cacheable node, at every level.
+    pub fn all(profile: &Profile) -> PlanSpec {
+        let cached =
+            profile.graphs.iter().map(|g| g.nodes.iter().map(|n| n.cacheable.then_some(0)).collect()).collect();
+        PlanSpec { cached }
+    }
+
+    /// The cacheable nodes the materials read.
+    pub fn outputs(profile: &Profile) -> PlanSpec {
+        let mut p = PlanSpec::none(profile);
+        for s in &profile.streams {
+            for &o in &s.outputs {
+                if profile.graphs[s.graph as usize].nodes[o as usize].cacheable {
+                    p.cached[s.graph as usize][o as usize] = Some(0);
+                }
+            }
+        }
+        p
+    }
+
+    /// Number of cached nodes.
+    pub fn count(&self) -> usize {
+        self.cached.iter().flatten().filter(|c| c.is_some()).count()
+    }
+}
+
+/// What the model predicts for one node.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct NodePrediction {
+    /// Evaluations (tile fills' texels included).
+    pub evaluations: f64,
+    /// Cache lookups of the node's texture.
+    pub lookups: f64,
+    /// Tiles filled (distinct tiles: no evictions).
+    pub tiles: f64,
+    /// Bytes of those tiles.
+    pub bytes: f64,
+    /// Thread-seconds in the node's evaluations.
+    pub thread_s: f64,
+}
+
+/// What the model predicts for a plan.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Prediction {
+    /// Node evaluations, all nodes.
+    pub evaluations: f64,
+    /// Cache lookups, all cached nodes.
+    pub lookups: f64,
+    /// Tiles filled.
+    pub tiles_filled: f64,
+    /// Texels filled.
+    pub texels_filled: f64,
+    /// Bytes of all filled tiles (the cache's peak when the budget holds them).
+    pub peak_bytes: f64,
+    /// Thread-seconds spent on textures (evaluations, lookups, fills).
+    pub texture_thread_s: f64,
+    /// Thread-seconds outside textures.
+    pub base_thread_s: f64,
+    /// Wall-clock seconds of the render.
+    pub render_s: f64,
+    /// Per graph, per node.
+    pub nodes: Vec<Vec<NodePrediction>>,
+}
+
+/// One stream's tile taps at one level.
+#[derive(Debug, Default)]
+struct LevelTaps {
+    /// `(x, y, lower touches, upper touches)`.
+    tiles: Vec<(i32, i32, u64, u64)>,
+    /// Observed and extrapolated distinct tiles per variant (index 1 lower, 2 upper, 3 both).
+    observed: [f64; 4],
+    predicted: [f64; 4],
+}
+
+struct StreamData {
+    graph: usize,
+    outputs: Vec<u32>,
+    /// Scaled requests per bin.
+    requests: Vec<f64>,
+    /// Per level `0..=max_level`.
+    levels: Vec<LevelTaps>,
+}
+
+/// A component of a tile set: the taps of one stream at one level, of one variant, dilated.
+type Component = (u32, u8, u8, u8); // (stream, level, variant, depth)
+
+/// Per level, per stream: (variant bits, dilation depth).
+type TileSet = BTreeMap<u8, BTreeMap<u32, (u8, u8)>>;
+
+/// The model for one profile and one target render (see the module documentation).
+pub struct Model<'p> {
+    profile: &'p Profile,
+    target: Target,
+    bins: usize,
+    streams: Vec<StreamData>,
+    /// Per graph, per node, per bin: nanoseconds per evaluation (overhead included).
+    cost: Vec<Vec<Vec<f64>>>,
+    base_thread_s: f64,
+    memo: RefCell<HashMap<Vec<Component>, f64>>,
+}
+
+/// Bin of a level: `level + 1` (bin 0: finer than level 0).
+#[inline]
+fn bin(level: i32) -> usize {
+    (level - FINER_THAN_LEVEL0) as usize
+}
+
+impl<'p> Model<'p> {
+    /// Prepares the model: scales the profile's requests to `target`, extrapolates its tile
+    /// counts and fixes each node's cost per level.
+    pub fn new(profile: &'p Profile, target: Target) -> Result<Model<'p>> {
+        profile.validate()?;
+        if target.samples == 0 || target.threads == 0 {
+            return Err(PlanError::Settings("the target render needs at least one sample and one thread".into()));
+        }
+        let scale = target.samples as f64 / profile.render.samples as f64;
+        let tile_samples = match profile.render.tile_samples {
+            0 => profile.render.samples,
+            t => t,
+        };
+        let tile_scale = target.samples as f64 / tile_samples as f64;
+        let max = profile.cache.max_level;
+        let bins = usize::from(max) + 2;
+        let streams = profile
+            .streams
+            .iter()
+            .map(|s| {
+                let mut requests = vec![0.0; bins];
+                for r in &s.requests {
+                    requests[bin(r.level)] += r.requests as f64 * scale;
+                }
+                let mut levels: Vec<LevelTaps> = (0..=max).map(|_| LevelTaps::default()).collect();
+                for lt in &s.tiles {
+                    let l = &mut levels[usize::from(lt.level)];
+                    l.tiles.extend(lt.tiles.iter().map(|t| (t[0] as i32, t[1] as i32, t[2] as u64, t[3] as u64)));
+                }
+                for l in &mut levels {
+                    for v in 1..4u8 {
+                        let counts = l.tiles.iter().map(|t| pick(v, t.2, t.3));
+                        let n: u64 = counts.clone().sum();
+                        l.observed[usize::from(v)] = counts.clone().filter(|&c| c > 0).count() as f64;
+                        l.predicted[usize::from(v)] = richness::extrapolate(counts, n as f64 * (tile_scale - 1.0));
+                    }
+                }
+                StreamData { graph: s.graph as usize, outputs: s.outputs.clone(), requests, levels }
+            })
+            .collect();
+        let m = &profile.machine;
+        let cost = profile
+            .graphs
+            .iter()
+            .map(|g| {
+                g.nodes
+                    .iter()
+                    .map(|n| {
+                        let mut per_bin: Vec<Option<f64>> = vec![None; bins];
+                        for c in n.cost.iter().filter(|c| c.samples > 0) {
+                            per_bin[bin(c.level)] = Some((c.ns - m.timer_ns).max(0.0));
+                        }
+                        nearest_fill(&per_bin).into_iter().map(|c| c + m.node_overhead_ns).collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let r = &profile.render;
+        let outside = if r.outside_thread_s > 0.0 {
+            r.outside_thread_s
+        } else {
+            (r.wall_s * f64::from(r.threads) - r.texture_thread_s - r.tap_thread_s).max(0.0)
+        };
+        let base_thread_s = outside / r.samples as f64 * target.samples as f64;
+        Ok(Model { profile, target, bins, streams, cost, base_thread_s, memo: RefCell::new(HashMap::new()) })
+    }
+
+    /// The profile.
+    pub fn profile(&self) -> &Profile {
+        self.profile
+    }
+
+    /// The target render.
+    pub fn target(&self) -> Target {
+        self.target
+    }
+
+    /// Visits the nodes one request reaches from `roots` at `bin`: `answer(node)` for nodes the
+    /// cache serves (their inputs are not visited), `evaluate(node)` for the others.
+    fn walk(
+        &self,
+        graph: usize,
+        roots: &[u32],
+        bin: usize,
+        plan: &PlanSpec,
+        seen: &mut Vec<bool>,
+        mut visit: impl FnMut(u32, bool),
+    ) {
+        let nodes = &self.profile.graphs[graph].nodes;
+        seen.clear();
+        seen.resize(nodes.len(), false);
+        let mut stack: Vec<u32> = roots.to_vec();
+        while let Some(n) = stack.pop() {
+            if std::mem::replace(&mut seen[n as usize], true) {
+                continue;
+            }
+            let served = bin > 0 && plan.cached[graph][n as usize].is_some_and(|min| bin > usize::from(min));
+            visit(n, served);
+            if !served {
+                stack.extend(nodes[n as usize].inputs.iter().copied());
+            }
+        }
+    }
+
+    /// Predicts the final render's cost under `plan`.
+    pub fn predict(&self, plan: &PlanSpec) -> Prediction {
+        let p = self.profile;
+        let geo = &p.cache;
+        let mut evals: Vec<Vec<Vec<f64>>> =
+            p.graphs.iter().map(|g| vec![vec![0.0; self.bins]; g.nodes.len()]).collect();
+        let mut lookups: Vec<Vec<f64>> = p.graphs.iter().map(|g| vec![0.0; g.nodes.len()]).collect();
+        let mut sets: Vec<Vec<TileSet>> = p.graphs.iter().map(|g| vec![TileSet::new(); g.nodes.len()]).collect();
+        let mut seen = Vec::new();
+        for (si, s) in self.streams.iter().enumerate() {
+            for (b, &r) in s.requests.iter().enumerate() {
+                if r <= 0.0 {
+                    continue;
+                }
+                let g = s.graph;
+                self.walk(g, &s.outputs, b, plan, &mut seen, |n, served| {
+                    if served {
+                        lookups[g][n as usize] += r;
+                        let level = (b - 1) as u8;
+                        merge(&mut sets[g][n as usize], level, si as u32, 1, 0);
+                        if level < geo.max_level {
+                            merge(&mut sets[g][n as usize], level + 1, si as u32, 2, 0);
+                        }
+                    } else {
+                        evals[g][n as usize][b] += r;
+                    }
+                });
+            }
+        }
+        let mut nodes: Vec<Vec<NodePrediction>> =
+            p.graphs.iter().map(|g| vec![NodePrediction::default(); g.nodes.len()]).collect();
+        let texels_per_tile = geo.texels_per_tile();
+        for (g, graph) in p.graphs.iter().enumerate() {
+            for n in (0..graph.nodes.len()).rev() {
+                if plan.cached[g][n].is_none() {
+                    continue;
+                }
+                let set = std::mem::take(&mut sets[g][n]);
+                for (&level, comps) in &set {
+                    let tiles = self.count(level, comps);
+                    let texels = tiles * texels_per_tile;
+                    nodes[g][n].tiles += tiles;
+                    nodes[g][n].bytes += tiles * geo.tile_bytes(graph.nodes[n].channels);
+                    let b = bin(i32::from(level));
+                    evals[g][n][b] += texels;
+                    let inputs = &graph.nodes[n].inputs;
+                    self.walk(g, inputs, b, plan, &mut seen, |u, served| {
+                        if served {
+                            lookups[g][u as usize] += texels;
+                            for (&s, &(v, d)) in comps {
+                                merge(&mut sets[g][u as usize], level, s, v, d.saturating_add(1));
+                            }
+                        } else {
+                            evals[g][u as usize][b] += texels;
+                        }
+                    });
+                }
+            }
+        }
+        let m = &p.machine;
+        let mut out = Prediction { base_thread_s: self.base_thread_s, ..Prediction::default() };
+        for (g, graph) in p.graphs.iter().enumerate() {
+            for n in 0..graph.nodes.len() {
+                let np = &mut nodes[g][n];
+                np.lookups = lookups[g][n];
+                np.evaluations = evals[g][n].iter().sum();
+                np.thread_s = evals[g][n].iter().zip(&self.cost[g][n]).map(|(e, c)| e * c).sum::<f64>() * 1e-9;
+                out.evaluations += np.evaluations;
+                out.lookups += np.lookups;
+                out.tiles_filled += np.tiles;
+                out.peak_bytes += np.bytes;
+                out.texture_thread_s += np.thread_s;
+            }
+        }
+        out.texels_filled = out.tiles_filled * texels_per_tile;
+        out.texture_thread_s += (out.lookups * m.lookup_ns + out.texels_filled * m.fill_ns_per_texel) * 1e-9;
+        out.render_s = (out.base_thread_s + out.texture_thread_s) / f64::from(self.target.threads);
+        out.nodes = nodes;
+        out
+    }
+
+    /// Predicted distinct tiles of a tile set at `level` (memoised).
+    fn count(&self, level: u8, comps: &BTreeMap<u32, (u8, u8)>) -> f64 {
+        let key: Vec<Component> = comps.iter().map(|(&s, &(v, d))| (s, level, v, d)).collect();
+        if let Some(&c) = self.memo.borrow().get(&key) {
+            return c;
+        }
+        let mut union: HashSet<(i32, i32)> = HashSet::new();
+        let mut unseen = 0.0;
+        for &(s, level, v, d) in &key {
+            let taps = &self.streams[s as usize].levels[usize::from(level)];
+            let before = union.len();
+            let mut own: HashSet<(i32, i32)> = HashSet::new();
+            for &(x, y, lo, up) in &taps.tiles {
+                if pick(v, lo, up) == 0 {
+                    continue;
+                }
+                for dy in 0..=i32::from(d) {
+                    for dx in 0..=i32::from(d) {
+                        own.insert((x + dx, y + dy));
+                    }
+                }
+            }
+            let observed = taps.observed[usize::from(v)];
+            if observed > 0.0 {
+                let growth = own.len() as f64 / observed;
+                unseen += (taps.predicted[usize::from(v)] - observed) * growth;
+            }
+            union.extend(own);
+            debug_assert!(union.len() >= before);
+        }
+        let c = union.len() as f64 + unseen;
+        self.memo.borrow_mut().insert(key, c);
+        c
+    }
+}
+
+/// Touches of a tile counted by variant `v` (bit 1: lower taps, bit 2: upper taps).
+#[inline]
+fn pick(v: u8, lower: u64, upper: u64) -> u64 {
+    (if v & 1 != 0 { lower } else { 0 }) + (if v & 2 != 0 { upper } else { 0 })
+}
+
+/// Adds stream `s`'s taps of variant `v` at dilation `d` to `set` at `level`: the union of two
+/// components of one stream is bounded by their variants' union at the larger dilation.
+fn merge(set: &mut TileSet, level: u8, s: u32, v: u8, d: u8) {
+    let e = set.entry(level).or_default().entry(s).or_insert((0, 0));
+    *e = (e.0 | v, e.1.max(d));
+}
+
+/// Fills missing entries with the nearest present one (ties: the finer level); all zero when
+/// none is present.
+fn nearest_fill(v: &[Option<f64>]) -> Vec<f64> {
+    (0..v.len())
+        .map(|i| {
+            (0..v.len())
+                .filter_map(|j| v[j].map(|c| (i.abs_diff(j), j, c)))
+                .min_by_key(|&(d, j, _)| (d, j))
+                .map_or(0.0, |(_, _, c)| c)
+        })
+        .collect()
+}
