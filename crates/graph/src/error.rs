@@ -112,6 +112,42 @@ pub enum LoadErrorKind {
     /// A required attribute is absent or an element is misplaced.
     #[error("{0}")]
     Structure(String),
+    /// Elements the importer cannot evaluate, every one in the document (strict loading).
+    #[error("{} unsupported: {}; supported nodes: {supported}", items.len(), list_unsupported(items))]
+    Unsupported {
+        /// The unsupported elements, in the order they were found.
+        items: Vec<Unsupported>,
+        /// Every supported node category.
+        supported: String,
+    },
+}
+
+/// A node the importer cannot evaluate: an unknown category, or a known one with a type, input
+/// or definition it does not support.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Unsupported {
+    /// The node's category (`noise3d`, ...).
+    pub category: String,
+    /// The node's qualified name (`nodegraph/node`).
+    pub node: String,
+    /// What is unsupported beyond the category itself (empty when the category is unknown).
+    pub detail: String,
+    /// Where the node is.
+    pub location: Location,
+}
+
+impl fmt::Display for Unsupported {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "`{}` (node `{}`", self.category, self.node)?;
+        if !self.detail.is_empty() {
+            write!(f, ", {}", self.detail)?;
+        }
+        write!(f, ") at {}", self.location)
+    }
+}
+
+fn list_unsupported(items: &[Unsupported]) -> String {
+    items.iter().map(|u| u.to_string()).collect::<Vec<_>>().join(", ")
 }
 
 /// A load error with its file and line.

@@ -77,7 +77,25 @@ pub struct EvalScratch {
     /// Sampled timings: nanoseconds and count of the timed evaluations per node.
     timed_ns: Vec<u64>,
     timed: Vec<u64>,
+    /// Profiling: sampled timings per (node, bin), `bins` per node; empty when off.
+    binned: BinnedTimings,
     work: Work,
+}
+
+/// Sampled self-time of each node split by a caller-chosen bin (a profiler labels each
+/// evaluation with the footprint's level). Off (empty) unless enabled.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct BinnedTimings {
+    /// Bins per node.
+    pub bins: usize,
+    /// One evaluation in this many of each node is timed while binned timing is on.
+    pub period: u64,
+    /// The bin the next evaluations are charged to.
+    pub current: usize,
+    /// Nanoseconds of the timed evaluations, index `node * bins + bin`.
+    pub ns: Vec<u64>,
+    /// Number of timed evaluations, index `node * bins + bin`.
+    pub count: Vec<u64>,
 }
 
 /// One evaluation in this many of each node is timed (two clock reads, ~50 ns, per 64
@@ -122,8 +140,29 @@ impl EvalScratch {
             lookups: vec![0; n],
             timed_ns: vec![0; n],
             timed: vec![0; n],
+            binned: BinnedTimings::default(),
             work: Work::default(),
         }
+    }
+
+    /// Starts recording sampled timings per node and per bin (`bins` bins; see
+    /// [`EvalScratch::set_bin`]).
+    /// One evaluation in `period` of each node is then timed (instead of [`TIMING_PERIOD`]).
+    pub fn enable_binned_timing(&mut self, bins: usize, period: u64) {
+        let n = self.values.len();
+        let period = period.max(1);
+        self.binned = BinnedTimings { bins, period, current: 0, ns: vec![0; n * bins], count: vec![0; n * bins] };
+    }
+
+    /// Charges the next evaluations' sampled timings to `bin` (ignored unless enabled; clamped).
+    #[inline]
+    pub fn set_bin(&mut self, bin: usize) {
+        self.binned.current = bin.min(self.binned.bins.saturating_sub(1));
+    }
+
+    /// The per-bin timings recorded so far.
+    pub fn binned_timings(&self) -> &BinnedTimings {
+        &self.binned
     }
 
     /// Evaluations per node since creation or the last reset.
@@ -291,7 +330,7 @@ impl Graph {
         // Nodes that read their inputs' gradients (heighttonormal) need them at points too.
         let point =
             is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].category == "heighttonormal");
-        let mut ins = [Filtered::zero(ValueType::Float); 12];
+        let mut ins = [Filtered::zero(ValueType::Float); nodes::MAX_INPUTS];
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];
             let node = &self.nodes[id.0 as usize];
@@ -300,13 +339,20 @@ impl Graph {
             }
             let n_in = node.inputs.len();
             let i = id.0 as usize;
-            let timed = scratch.evaluations[i] % TIMING_PERIOD == 0;
+            let period = if scratch.binned.bins > 0 { scratch.binned.period } else { TIMING_PERIOD };
+            let timed = scratch.evaluations[i].is_multiple_of(period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
             let mut ctx = Ctx { fp, point, work: &mut scratch.work };
             let v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
             if let Some(start) = start {
-                scratch.timed_ns[i] += start.elapsed().as_nanos() as u64;
+                let ns = start.elapsed().as_nanos() as u64;
+                scratch.timed_ns[i] += ns;
                 scratch.timed[i] += 1;
+                let b = &mut scratch.binned;
+                if b.bins > 0 {
+                    b.ns[i * b.bins + b.current] += ns;
+                    b.count[i * b.bins + b.current] += 1;
+                }
             }
             scratch.values[i] = v;
             scratch.evaluations[i] += 1;
@@ -319,6 +365,10 @@ impl Graph {
             Source::Texcoord => {
                 let mut w = Work::default();
                 geometry::texcoord(&Ctx { fp, point, work: &mut w })
+            }
+            Source::Geometry(g) => {
+                let mut w = Work::default();
+                geometry::geomprop(*g, &Ctx { fp, point, work: &mut w })
             }
             Source::Node { node, channel } => {
                 let v = scratch.values[node.0 as usize];

@@ -20,6 +20,9 @@ pub enum Source {
     Constant(Value),
     /// The geometric texture coordinate (MaterialX `UV0`, the default of `texcoord` inputs).
     Texcoord,
+    /// A geometric property of the shading point (MaterialX `Pobject`, `Nobject`, ...: the
+    /// default of 3D nodes' `position` / `normal` inputs); a vector3.
+    Geometry(GeomProp),
     /// Another node's output; `channel` picks one channel (outputs of `separateN`).
     Node {
         /// Upstream node.
@@ -27,6 +30,19 @@ pub enum Source {
         /// Channel picked from its value, if any.
         channel: Option<u8>,
     },
+}
+
+/// A geometric property of the shading point, in world space (= object space in tessera).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum GeomProp {
+    /// Position (`Pobject`, `Pworld`).
+    Position,
+    /// Shading normal (`Nobject`, `Nworld`).
+    Normal,
+    /// Tangent (`Tobject`, `Tworld`).
+    Tangent,
+    /// Bitangent (`Bobject`, `Bworld`).
+    Bitangent,
 }
 
 /// One node: its operation, type, connected inputs in the order of its [`nodes`] table.
@@ -40,6 +56,8 @@ pub(crate) struct Node {
     pub params: Vec<Param>,
     /// This node and every node it depends on, ascending (= topological order).
     pub plan: Box<[NodeId]>,
+    /// Whether its value depends on the shading point through uv alone.
+    pub uv_only: bool,
 }
 
 /// A named graph output.
@@ -123,6 +141,33 @@ impl Graph {
     pub fn node_plan(&self, id: NodeId) -> &[NodeId] {
         &self.nodes[id.0 as usize].plan
     }
+
+    /// Whether node `id` depends on the shading point through its uv alone: false when it or
+    /// anything upstream reads position, normal, tangent or bitangent (`position`, `normal`,
+    /// `tangent`, `bitangent`, a 3D noise's default `position`, `geompropvalue` of anything but
+    /// a uv set). Only such nodes can be cached as textures over the uv plane.
+    pub fn is_uv_only(&self, id: NodeId) -> bool {
+        self.nodes[id.0 as usize].uv_only
+    }
+
+    /// Whether a source depends on the shading point through its uv alone.
+    pub fn source_is_uv_only(&self, s: &Source) -> bool {
+        match s {
+            Source::Constant(_) | Source::Texcoord => true,
+            Source::Geometry(_) => false,
+            Source::Node { node, .. } => self.is_uv_only(*node),
+        }
+    }
+
+    /// Warnings about nodes that load but cannot do what the document asks (an unknown
+    /// `geompropvalue` giving its default, a second uv set read as the first), each naming
+    /// its node.
+    pub fn warnings(&self) -> Vec<String> {
+        self.nodes
+            .iter()
+            .filter_map(|n| nodes::warning(&n.op).map(|w| format!("node `{}` ({}): {w}", n.name, n.category)))
+            .collect()
+    }
 }
 
 /// Builds a [`Graph`] node by node; inputs must name nodes added before (so no cycles).
@@ -170,6 +215,7 @@ impl GraphBuilder {
         match s {
             Source::Constant(v) => v.ty,
             Source::Texcoord => ValueType::Vector2,
+            Source::Geometry(_) => ValueType::Vector3,
             Source::Node { node, channel } => {
                 if channel.is_some() {
                     ValueType::Float
@@ -209,6 +255,7 @@ impl GraphBuilder {
         let mut srcs = Vec::with_capacity(def.inputs.len());
         let mut types = Vec::with_capacity(def.inputs.len());
         let mut deps: Vec<NodeId> = Vec::new();
+        let mut uv_only = true;
         for spec in def.inputs {
             let src = match inputs.iter().find(|(n, _)| *n == spec.name) {
                 Some((_, s)) => s.clone(),
@@ -223,14 +270,20 @@ impl GraphBuilder {
                     found,
                 });
             }
-            if let Source::Node { node, .. } = src {
-                deps.push(node);
+            match src {
+                Source::Node { node, .. } => {
+                    deps.push(node);
+                    uv_only &= self.nodes[node.0 as usize].uv_only;
+                }
+                Source::Geometry(_) => uv_only = false,
+                Source::Constant(_) | Source::Texcoord => {}
             }
             srcs.push(src);
             types.push(found);
         }
         let op = (def.build)(def.category, ty, &types, &srcs, &params)
             .map_err(|msg| BuildError::Invalid { node: name.to_string(), message: msg })?;
+        uv_only &= !nodes::reads_geometry(&op);
         let id = NodeId(self.nodes.len() as u32);
         let mut plan: Vec<NodeId> = deps.iter().flat_map(|d| self.nodes[d.0 as usize].plan.iter().copied()).collect();
         plan.push(id);
@@ -244,6 +297,7 @@ impl GraphBuilder {
             inputs: srcs,
             params,
             plan: plan.into_boxed_slice(),
+            uv_only,
         });
         self.by_name.insert(name.to_string(), id);
         Ok(id)

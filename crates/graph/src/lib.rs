@@ -3,7 +3,9 @@
 //! A [`Graph`] is an immutable DAG of typed MaterialX nodes (float, vector2/3/4, color3/4)
 //! with named outputs, usually loaded from a `.mtlx` file by [`Document`] (which also exposes
 //! `standard_surface` materials as [`MaterialBinding`]s). [`Graph::eval_output`] evaluates an
-//! output at a [`Footprint`] — a uv centre and a 2×2 uv covariance Σ — and returns a
+//! output at a [`Footprint`] — a uv centre, a 2×2 uv covariance Σ and the surface
+//! [`Geometry`] there (position, frame, ∂P/∂u, ∂P/∂v; MaterialX's flat baking quad unless the
+//! renderer gives one) — and returns a
 //! [`Filtered`] value: per channel the [`Moments`] of the node's unfiltered output over
 //! `uv' ~ N(uv, Σ)`: its mean (the filtered value), the gradient of that mean with respect to
 //! uv, and its variance (the spread over the footprint). Σ = 0 is unfiltered evaluation and
@@ -17,9 +19,10 @@
 //!
 //! | family (file) | nodes | filtering |
 //! |---|---|---|
-//! | geometry (`nodes/geometry.rs`) | texcoord, constant, place2d, rotate2d, dot | exact (linear) |
+//! | geometry (`nodes/geometry.rs`) | texcoord, position, normal, tangent, bitangent, geompropvalue, constant, place2d, rotate2d, rotate3d, transformpoint, transformvector, transformnormal, dot | exact (linear): `position` spreads by the surface Jacobian (`J Σ Jᵀ`); object, model and world space are one in tessera; transformnormal by cubature (it normalises) |
 //! | noise (`nodes/noise.rs`) | noise2d, fractal2d, cellnoise2d, worleynoise2d, unifiednoise2d | Perlin: exact Gaussian convolution of the separable corner kernels up to σ = 0.25 lattice units, Gaussian damping beyond, octaves past the band limit dropped (never evaluated); cell noise: exact cell masses; Worley: 3×3 Gauss–Hermite then the global mean; unifiednoise2d: its type's node (fractal3d as an exactly filtered z-slice of 3D Perlin noise), clamped-ramp moments for the output clamp |
-//! | patterns (`nodes/pattern.rs`) | checkerboard, ramplr, ramptb, ramp4, splitlr, splittb, randomfloat, randomcolor | closed forms: square-wave expectations (erf sums / damped Fourier series), clamped-ramp moments, step probabilities Φ |
+//! | 3D noise (`nodes/noise3d.rs`) | noise3d, fractal3d, cellnoise3d, worleynoise3d, unifiednoise3d | as their 2D counterparts over the position input's per-axis spreads (the surface footprint's 3D marginals): Perlin exact up to σ = 0.25 lattice units per axis, damped beyond, octaves past the band limit dropped; cell noise exact cell masses; Worley Gauss–Hermite then the global mean (of the plane, for a footprint flat along a lattice axis) |
+//! | patterns (`nodes/pattern.rs`) | checkerboard, ramplr, ramptb, ramp4, ramp, splitlr, splittb, randomfloat, randomcolor | closed forms: square-wave expectations (erf sums / damped Fourier series), clamped-ramp moments, piecewise-polynomial moments (`ramp`), step probabilities Φ |
 //! | shapes (`nodes/shape.rs`) | circle, line, hexagon, grid, crosshatch, tiledcircles, tiledhexagons | coverage probabilities: grid closed form (periodic band masses); convex pieces (disk, capsule, hexagon, strips, clipped to cells) by Gauss–Legendre over the footprint's narrow axis of closed-form Φ chord masses along the other; tiled patterns become their coverage beyond 0.6 cells |
 //! | math (`nodes/math.rs`) | add … ifequal (see the file) | exact for linear nodes; closed forms for abs, clamp, min/max, smoothstep, floor/ceil/round/fract/modulo, sign, sin/cos, exp, conditionals; Gauss–Hermite / cubature for the rest |
 //! | channels (`nodes/channel.rs`) | combine2/3/4, extract, separate2/3/4, convert | exact |
@@ -33,6 +36,10 @@
 //! [`Graph::eval_node_direct`] evaluates one node filtered (a tile fill's call). The scratch
 //! counts evaluations per node and [`Work`] (octaves, lattice visits) for profiling; coarse
 //! footprints do less work than fine ones.
+//!
+//! [`bake`] evaluates one output on a grid of texels over a uv rectangle (point or one-texel
+//! filtered, in MaterialX's or Mitsuba's row order): what `tessera bake` writes and what the
+//! MaterialX conformance test (`tests/suite.rs`) compares with MaterialX's own bakes.
 //!
 //! ```
 //! use graph::{Document, Footprint, EvalScratch, LoadOptions};
@@ -54,6 +61,7 @@
 // Channel loops index several parallel per-channel arrays at once.
 #![allow(clippy::needless_range_loop)]
 
+pub mod bake;
 pub mod error;
 pub mod eval;
 pub mod gaussian;
@@ -63,9 +71,11 @@ pub mod mtlx;
 pub mod nodes;
 pub mod value;
 
-pub use error::{BuildError, LoadError, LoadErrorKind, Location};
-pub use eval::{EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, Work};
-pub use graph::{Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
+pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
+pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
+pub use eval::{BinnedTimings, EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, Work};
+pub use graph::{GeomProp, Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
 pub use mtlx::{parse_value, Document, LoadOptions, MaterialBinding, MaterialSource};
 pub use nodes::noise::{fractal_point, perlin_float, worley_point};
-pub use value::{Filtered, Footprint, Moments, Value, ValueType};
+pub use nodes::noise3d::{fractal3_point, perlin3, worley3_point};
+pub use value::{Filtered, Footprint, Geometry, Moments, Value, ValueType};

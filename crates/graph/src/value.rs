@@ -1,6 +1,6 @@
 //! Values flowing through a graph: unfiltered [`Value`]s and filtered [`Filtered`] moments.
 
-use glam::{Mat2, Vec2};
+use glam::{Mat2, Vec2, Vec3};
 use std::fmt;
 
 /// The MaterialX data types a node output or input can carry.
@@ -112,29 +112,84 @@ impl Value {
     }
 }
 
-/// The footprint of a path vertex in texture space: the Gaussian `N(uv, cov)`.
+/// The surface geometry at a shading point, for nodes that read more than uv (`position`,
+/// `normal`, `tangent`, `bitangent`, 3D noises through their default `position`).
+///
+/// Everything is in world space: tessera transforms meshes to world space at load and keeps no
+/// object transform, so MaterialX's `object`, `model` and `world` spaces coincide. `dpdu`,
+/// `dpdv` (and `dndu`, `dndv`) carry the uv footprint to the surface: a channel of the position
+/// has the uv gradient `(∂Pᵢ/∂u, ∂Pᵢ/∂v)`, so the 3D footprint of a uv covariance Σ is `J Σ Jᵀ`
+/// with `J = [dpdu dpdv]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Geometry {
+    /// Position.
+    pub p: Vec3,
+    /// Shading normal (unit).
+    pub n: Vec3,
+    /// Tangent (unit, along ∂P/∂u made orthogonal to `n`).
+    pub t: Vec3,
+    /// Bitangent (unit, `n × t`).
+    pub b: Vec3,
+    /// ∂P/∂u.
+    pub dpdu: Vec3,
+    /// ∂P/∂v.
+    pub dpdv: Vec3,
+    /// ∂N/∂u of the shading normal.
+    pub dndu: Vec3,
+    /// ∂N/∂v of the shading normal.
+    pub dndv: Vec3,
+}
+
+impl Geometry {
+    /// MaterialX's baking geometry, the quad `[−1, 1]²` in the plane z = 0 spanned by uv
+    /// `[0, 1]²`: position `(2u − 1, 2v − 1, 0)`, normal +z, tangent +x, bitangent +y,
+    /// `dpdu = (2, 0, 0)`, `dpdv = (0, 2, 0)`. The geometry of footprints built without one.
+    pub fn flat_quad(uv: Vec2) -> Geometry {
+        Geometry {
+            p: Vec3::new(2.0 * uv.x - 1.0, 2.0 * uv.y - 1.0, 0.0),
+            n: Vec3::Z,
+            t: Vec3::X,
+            b: Vec3::Y,
+            dpdu: Vec3::new(2.0, 0.0, 0.0),
+            dpdv: Vec3::new(0.0, 2.0, 0.0),
+            dndu: Vec3::ZERO,
+            dndv: Vec3::ZERO,
+        }
+    }
+}
+
+/// The footprint of a path vertex in texture space: the Gaussian `N(uv, cov)`, and the surface
+/// [`Geometry`] at its centre.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Footprint {
     /// Centre.
     pub uv: Vec2,
     /// 2×2 covariance in uv units (symmetric, positive semi-definite).
     pub cov: Mat2,
+    /// Surface geometry at the centre (MaterialX's flat baking quad unless given).
+    pub geom: Geometry,
 }
 
 impl Footprint {
-    /// A footprint with centre `uv` and covariance `cov`.
+    /// A footprint with centre `uv` and covariance `cov` on the flat baking quad
+    /// ([`Geometry::flat_quad`]).
     pub fn new(uv: Vec2, cov: Mat2) -> Footprint {
-        Footprint { uv, cov }
+        Footprint { uv, cov, geom: Geometry::flat_quad(uv) }
+    }
+
+    /// A footprint with centre `uv`, covariance `cov` and the surface geometry at its centre.
+    pub fn with_geometry(uv: Vec2, cov: Mat2, geom: Geometry) -> Footprint {
+        Footprint { uv, cov, geom }
     }
 
     /// A point: unfiltered evaluation.
     pub fn point(uv: Vec2) -> Footprint {
-        Footprint { uv, cov: Mat2::ZERO }
+        Footprint::new(uv, Mat2::ZERO)
     }
 
     /// An isotropic footprint with standard deviation `sigma` uv units.
     pub fn isotropic(uv: Vec2, sigma: f32) -> Footprint {
-        Footprint { uv, cov: Mat2::from_diagonal(Vec2::splat(sigma * sigma)) }
+        Footprint::new(uv, Mat2::from_diagonal(Vec2::splat(sigma * sigma)))
     }
 
     /// `gᵀ Σ h`: the covariance of two linear functions with gradients `g`, `h`.

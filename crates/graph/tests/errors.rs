@@ -26,8 +26,10 @@ fn unknown_node_lists_supported_nodes() {
     let (p, e) = load("unknown.mtlx", "<nodegraph name=\"g\">\n  <blurrify name=\"b\" type=\"float\"/>\n</nodegraph>");
     check(&e, &p, 4);
     match &e.kind {
-        LoadErrorKind::Build(BuildError::UnknownNode { category, supported }) => {
-            assert_eq!(category, "blurrify");
+        LoadErrorKind::Unsupported { items, supported } => {
+            assert_eq!(items.len(), 1);
+            assert_eq!(items[0].category, "blurrify");
+            assert_eq!(items[0].node, "g/b");
             assert!(supported.contains("noise2d") && supported.contains("checkerboard"));
         }
         k => panic!("unexpected {k:?}"),

@@ -39,6 +39,26 @@ pub enum Strategy {
     /// rectangle the scene's shapes use at `RES × RES` texels with all coarser mip levels, then
     /// sample it like a bitmap (footprints finer than a baked texel read the finest level).
     Bake(u32),
+    /// The nodes (and finest cached levels) of a plan file (`tessera.plan/1`, written by
+    /// `tessera plan` or `--strategy auto`).
+    Plan(std::path::PathBuf),
+    /// Profile, plan and render (resolved by the caller into [`NodeCache::from_plan`]).
+    Auto,
+}
+
+impl std::fmt::Display for Strategy {
+    /// The strategy as `--strategy` spells it.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Strategy::None => f.write_str("none"),
+            Strategy::Outputs => f.write_str("outputs"),
+            Strategy::All => f.write_str("all"),
+            Strategy::Auto => f.write_str("auto"),
+            Strategy::Nodes(n) => write!(f, "nodes:{}", n.join(",")),
+            Strategy::Plan(p) => write!(f, "plan:{}", p.display()),
+            Strategy::Bake(r) => write!(f, "bake:{r}"),
+        }
+    }
 }
 
 impl FromStr for Strategy {
@@ -48,6 +68,8 @@ impl FromStr for Strategy {
             "none" => Strategy::None,
             "outputs" => Strategy::Outputs,
             "all" => Strategy::All,
+            "auto" => Strategy::Auto,
+            _ if s.starts_with("plan:") && s.len() > 5 => Strategy::Plan(s[5..].into()),
             _ if s.starts_with("bake:") => {
                 let res: u32 =
                     s[5..].parse().map_err(|_| format!("bake:RES needs a whole number of texels, got '{s}'"))?;
@@ -62,7 +84,7 @@ impl FromStr for Strategy {
                 }
                 _ => {
                     return Err(format!(
-                        "unknown strategy '{s}' (expected none, outputs, all, nodes:a,b,c or bake:RES)"
+                        "unknown strategy '{s}' (expected none, outputs, all, auto, nodes:a,b,c, plan:FILE or bake:RES)"
                     ))
                 }
             },
@@ -70,7 +92,7 @@ impl FromStr for Strategy {
     }
 }
 
-fn channels(ty: ValueType) -> Option<u8> {
+pub(crate) fn channels(ty: ValueType) -> Option<u8> {
     match ty {
         ValueType::Float | ValueType::Integer | ValueType::Boolean => Some(1),
         ValueType::Vector2 => Some(2),
@@ -79,9 +101,46 @@ fn channels(ty: ValueType) -> Option<u8> {
     }
 }
 
-/// Whether caching node `id` can pay: it computes something and is not a coordinate.
-fn worth_caching(g: &Graph, id: NodeId) -> bool {
-    !matches!(g.node_category(id), "texcoord" | "constant") && g.node_type(id) != ValueType::Vector2
+/// Whether caching node `id` can pay: it computes something, is not a coordinate, and depends
+/// on the shading point through uv alone (a texture over uv cannot hold what varies with the
+/// surface's position or frame).
+pub(crate) fn worth_caching(g: &Graph, id: NodeId) -> bool {
+    !matches!(g.node_category(id), "texcoord" | "constant")
+        && g.node_type(id) != ValueType::Vector2
+        && g.is_uv_only(id)
+}
+
+/// Marks the nodes of `plan` in `chosen` with their finest cached levels; errors name nodes the
+/// scene's graphs do not have or cannot cache.
+fn select_plan(
+    graphs: &[SceneGraph],
+    plan: &plan::PlanFile,
+    chosen: &mut [Vec<bool>],
+    min_level: &mut [Vec<u8>],
+) -> std::result::Result<(), String> {
+    for pn in &plan.nodes {
+        let Some(gi) = graphs.iter().position(|g| g.file_name() == pn.graph) else {
+            let names: Vec<&str> = graphs.iter().map(|g| g.file_name()).collect();
+            return Err(format!(
+                "the plan caches nodes of graph '{}', which this scene does not use (its graphs: {}); was the plan made for another scene?",
+                pn.graph,
+                names.join(", ")
+            ));
+        };
+        let g = graphs[gi].graph();
+        let Some(id) = g.node_id(&pn.node) else {
+            return Err(format!(
+                "the plan caches node '{}', which graph '{}' does not have; was the plan made for another version of it?",
+                pn.node, pn.graph
+            ));
+        };
+        if channels(g.node_type(id)).is_none() || !worth_caching(g, id) {
+            return Err(format!("the plan caches node '{}', which cannot be cached in texture space", pn.node));
+        }
+        chosen[gi][id.0 as usize] = true;
+        min_level[gi][id.0 as usize] = pn.min_level.min(MAX_LEVEL);
+    }
+    Ok(())
 }
 
 /// The scene's node cache: one virtual texture per cached node.
@@ -92,6 +151,8 @@ pub struct NodeCache {
     filter: Filter,
     /// Baked textures read every footprint from the cache (finer ones clamp to level 0).
     baked: bool,
+    /// Per graph, per node: the finest level served from the cache (finer requests evaluate).
+    min_level: Vec<Vec<u8>>,
 }
 
 /// A uv rectangle `(min, max)`.
@@ -133,10 +194,24 @@ impl NodeCache {
     pub fn new(scene: &crate::scene::Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
         let (graphs, materials) = (&scene.graphs[..], &scene.materials[..]);
         let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
+        let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
         // For bakes: the uv rectangle each output node must cover.
         let mut rects: Vec<Vec<Option<UvRect>>> = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
         match strategy {
             Strategy::None => return Ok(None),
+            Strategy::Auto => {
+                return Err(Error::plain(
+                    "--strategy auto is resolved by profiling and planning first (tessera render does this)",
+                ))
+            }
+            Strategy::Plan(path) => {
+                let text = std::fs::read_to_string(path)
+                    .map_err(|e| Error::plain(format!("{}: cannot read the plan file: {e}", path.display())))?;
+                let plan =
+                    plan::PlanFile::from_json(&text).map_err(|e| Error::plain(format!("{}: {e}", path.display())))?;
+                select_plan(graphs, &plan, &mut chosen, &mut min_level)
+                    .map_err(|e| Error::plain(format!("{}: {e}", path.display())))?;
+            }
             Strategy::Bake(_) => {
                 let bounds = material_uv_bounds(scene);
                 for (mi, m) in materials.iter().enumerate() {
@@ -145,7 +220,8 @@ impl NodeCache {
                         let g = graphs[mg.graph as usize].graph();
                         for &out in mg.plan.outputs() {
                             if let Source::Node { node, .. } = g.output(out).source {
-                                if channels(g.node_type(node)).is_some() {
+                                // Outputs that read the surface's geometry are evaluated directly.
+                                if channels(g.node_type(node)).is_some() && g.is_uv_only(node) {
                                     chosen[mg.graph as usize][node.0 as usize] = true;
                                     let r = &mut rects[mg.graph as usize][node.0 as usize];
                                     *r = union(*r, lo, hi);
@@ -193,6 +269,13 @@ impl NodeCache {
                                     "node '{name}' has 4 channels; the cache stores at most 3"
                                 )));
                             }
+                            if !graphs[*gi].graph().is_uv_only(*id) {
+                                return Err(Error::plain(format!(
+                                    "--strategy nodes: node '{name}' depends on the surface's position or frame \
+                                     (position, normal, tangent, bitangent or a 3D noise upstream), not on uv alone; \
+                                     it cannot be cached as a texture over uv"
+                                )));
+                            }
                             chosen[*gi][id.0 as usize] = true;
                         }
                         [] => {
@@ -214,6 +297,18 @@ impl NodeCache {
                 }
             }
         }
+        NodeCache::build(graphs, strategy, chosen, min_level, rects, budget_bytes).map(Some)
+    }
+
+    /// The cache for the chosen nodes (filled now for bakes).
+    fn build(
+        graphs: &[SceneGraph],
+        strategy: &Strategy,
+        chosen: Vec<Vec<bool>>,
+        min_level: Vec<Vec<u8>>,
+        rects: Vec<Vec<Option<UvRect>>>,
+        budget_bytes: usize,
+    ) -> Result<NodeCache> {
         // Threads wait for a tile another thread is filling: the direct-evaluation alternative
         // was measured to change images between thread counts, and images must not.
         let config = CacheConfig { in_flight: cache::InFlight::Wait, ..CacheConfig::with_budget(budget_bytes) };
@@ -243,11 +338,29 @@ impl NodeCache {
         // Trilinear, not anisotropic probes: on the demo scenes the probes filled 8× more texels
         // (finer levels along grazing footprints) and made caching slower than evaluating;
         // trilinear blurs elongated footprints along their minor axis instead.
-        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked };
+        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked, min_level };
         if baked {
             nc.bake(graphs, &rects)?;
         }
-        Ok(Some(nc))
+        Ok(nc)
+    }
+
+    /// The cache for a plan (as [`Strategy::Plan`] reads from a file); `None` when the plan
+    /// caches nothing.
+    pub fn from_plan(
+        scene: &crate::scene::Scene,
+        plan: &plan::PlanFile,
+        budget_bytes: usize,
+    ) -> Result<Option<NodeCache>> {
+        let graphs = &scene.graphs[..];
+        let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
+        let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
+        select_plan(graphs, plan, &mut chosen, &mut min_level).map_err(Error::plain)?;
+        if chosen.iter().flatten().all(|c| !c) {
+            return Ok(None);
+        }
+        let rects = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
+        NodeCache::build(graphs, &Strategy::Plan(Default::default()), chosen, min_level, rects, budget_bytes).map(Some)
     }
 
     /// Fills every tile of every level of the baked textures over their uv rectangles.
@@ -365,8 +478,11 @@ impl NodeOverride for GraphOverride<'_, '_> {
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
         let tex = nc.textures[self.graph as usize][node.0 as usize]?;
-        if !nc.baked && cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < 0.0 {
-            return None; // finer than level 0: evaluate directly
+        if !nc.baked {
+            let min = nc.min_level[self.graph as usize][node.0 as usize];
+            if cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < f32::from(min) {
+                return None; // finer than level 0 or than the plan's threshold: evaluate directly
+            }
         }
         let fill = |req: cache::TexelRequest| {
             let f = self.access.fill(self.graph, node, &Footprint::new(req.uv, req.covariance()));

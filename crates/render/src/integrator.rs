@@ -437,7 +437,7 @@ pub fn radiance<O: PathObserver>(
                 Some(v) => footprint::uv_covariance(var, v).as_mat2() * settings_r.filter_scale_squared(),
                 None => Mat2::ZERO,
             };
-            shade.evaluate(&scene.graphs, material, &graph::Footprint::new(si.uv, cov))
+            shade.evaluate(&scene.graphs, material, &crate::shading::footprint_at(&si, cov))
         };
         let bsdf = material.bsdf.at(&ShadeContext { uv: si.uv, outputs });
         // A graph-driven shading normal bends the frame the BSDF is evaluated in.

@@ -21,6 +21,7 @@ pub mod loader;
 pub mod math;
 pub mod mesh;
 pub mod pathfootprint;
+pub mod profiling;
 pub mod sampling;
 pub mod scene;
 pub mod shading;

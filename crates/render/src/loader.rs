@@ -159,6 +159,9 @@ impl Builder {
         }
         let accel: Box<dyn crate::geometry::Intersector> = Box::new(Accel::build(&self.shapes));
         let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
+        for (k, mg) in self.materials.iter_mut().flat_map(|m| m.graphs.iter_mut()).enumerate() {
+            mg.stream = k as u32;
+        }
         let infinite =
             self.emitters.iter().enumerate().filter(|(_, e)| e.is_infinite()).map(|(i, _)| i as u32).collect();
         Ok(Scene {
@@ -658,7 +661,7 @@ impl Builder {
                 .map(|(slot, (_, out))| (*out, slot as u32))
                 .unzip();
             let plan = self.graphs[g as usize].graph().plan(&outputs);
-            graphs.push(MaterialGraph { graph: g, plan, slots });
+            graphs.push(MaterialGraph { graph: g, plan, slots, stream: 0 });
         }
         self.pending_outputs.clear();
         let normal_slot = self.pending_normal.take();

@@ -20,6 +20,11 @@ pub struct SceneGraph {
 }
 
 impl SceneGraph {
+    /// The document's file name (without folders): how profiles and plans name the graph.
+    pub fn file_name(&self) -> &str {
+        self.name.rsplit(['/', '\\']).next().unwrap_or(&self.name)
+    }
+
     /// The graph.
     pub fn graph(&self) -> &Graph {
         self.document.graph()
@@ -35,6 +40,9 @@ pub struct MaterialGraph {
     pub plan: EvalPlan,
     /// For each output of `plan`, the slot its value goes to.
     pub slots: Vec<u32>,
+    /// Index of this (material, graph) pair among all the scene's: the request stream a
+    /// profile records it as.
+    pub stream: u32,
 }
 
 /// A BSDF and the graph outputs its textures read.
@@ -89,6 +97,8 @@ pub struct ShadeScratch<'a> {
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
     cache: Option<crate::caching::CacheAccess<'a>>,
+    /// The profiler's per-thread recorder, when profiling.
+    pub(crate) tap: Option<Box<crate::profiling::Tap>>,
 }
 
 impl<'a> ShadeScratch<'a> {
@@ -114,6 +124,7 @@ impl<'a> ShadeScratch<'a> {
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
             cache: None,
+            tap: None,
         }
     }
 
@@ -124,15 +135,24 @@ impl<'a> ShadeScratch<'a> {
             let g = graphs[mg.graph as usize].graph();
             let n = mg.slots.len();
             let scratch = &mut self.scratches[mg.graph as usize];
-            match &self.cache {
-                Some(access) => g.eval(&mg.plan, fp, scratch, &access.for_graph(mg.graph), &mut self.tmp[..n]),
-                None => g.eval(&mg.plan, fp, scratch, &NoOverride, &mut self.tmp[..n]),
+            if let Some(tap) = &mut self.tap {
+                tap.evaluate(mg.stream, g, &mg.plan, fp, scratch, &mut self.tmp[..n]);
+            } else {
+                match &self.cache {
+                    Some(access) => g.eval(&mg.plan, fp, scratch, &access.for_graph(mg.graph), &mut self.tmp[..n]),
+                    None => g.eval(&mg.plan, fp, scratch, &NoOverride, &mut self.tmp[..n]),
+                }
             }
             for (k, &slot) in mg.slots.iter().enumerate() {
                 self.outputs[slot as usize] = self.tmp[k];
             }
         }
         &self.outputs[..material.slot_count as usize]
+    }
+
+    /// The per-graph evaluation scratches (the profiler turns on their binned timings).
+    pub(crate) fn eval_scratches_mut(&mut self) -> &mut [EvalScratch] {
+        &mut self.scratches
     }
 
     /// Adds this scratch's per-node statistics to `stats` (one entry per scene graph).
@@ -147,6 +167,26 @@ impl<'a> ShadeScratch<'a> {
             }
         }
     }
+}
+
+/// The footprint a material's graphs are evaluated over at surface hit `si`: its uv centre and
+/// uv covariance `cov`, and the hit's geometry for nodes that read more than uv (`position`,
+/// `normal`, `tangent`, `bitangent`, 3D noises): world position, shading normal, the shading
+/// frame's tangent (∂p/∂u made orthogonal to the normal) and bitangent, ∂p/∂u, ∂p/∂v (so the
+/// position's footprint is `J Σ Jᵀ`) and ∂n/∂u, ∂n/∂v. World space is also MaterialX's object
+/// space here: shapes are transformed to world space at load.
+pub fn footprint_at(si: &crate::geometry::SurfaceInteraction, cov: glam::Mat2) -> Footprint {
+    let geom = graph::Geometry {
+        p: si.p,
+        n: si.sh.n,
+        t: si.sh.s,
+        b: si.sh.t,
+        dpdu: si.dpdu,
+        dpdv: si.dpdv,
+        dndu: si.dndu,
+        dndv: si.dndv,
+    };
+    Footprint::with_geometry(si.uv, cov, geom)
 }
 
 /// The shading frame bent to the normal `n_ts` given in the frame's own coordinates (a graph's

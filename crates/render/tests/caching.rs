@@ -97,3 +97,94 @@ fn baked_textures_approximate_direct_evaluation() {
     }
     assert!("bake:0".parse::<Strategy>().is_err() && "bake:x".parse::<Strategy>().is_err());
 }
+
+/// A graph mixing a uv-only branch (a checkerboard) with one that reads the surface: whether a
+/// point's world x lies beyond 2.5, times the checkerboard.
+const GEOMETRY_MTLX: &str = r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="NG">
+    <checkerboard name="checks" type="color3">
+      <input name="color1" type="color3" value="1, 1, 1"/>
+      <input name="color2" type="color3" value="0.5, 0.5, 0.5"/>
+      <input name="uvtiling" type="vector2" value="4, 4"/>
+    </checkerboard>
+    <position name="p" type="vector3"/>
+    <extract name="x" type="float"><input name="in" type="vector3" nodename="p"/><input name="index" type="integer" value="0"/></extract>
+    <ifgreater name="right" type="color3">
+      <input name="value1" type="float" nodename="x"/>
+      <input name="value2" type="float" value="2.5"/>
+      <input name="in1" type="color3" nodename="checks"/>
+      <input name="in2" type="color3" value="0, 0, 0"/>
+    </ifgreater>
+    <output name="out_color" type="color3" nodename="right"/>
+  </nodegraph>
+</materialx>
+"#;
+
+/// Mitsuba's rectangle (x, y in [-1, 1], normal +z) moved to x = 5 in world space, under a
+/// white sky, seen from +z: each pixel's radiance is the reflectance at its hit point.
+const GEOMETRY_SCENE: &str = r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="perspective">
+        <float name="fov" value="30"/>
+        <transform name="to_world"><lookat origin="5, 0, 6" target="5, 0, 0" up="0, 1, 0"/></transform>
+        <sampler type="independent"><integer name="sample_count" value="4"/></sampler>
+        <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="24"/></film>
+    </sensor>
+    <shape type="rectangle">
+        <transform name="to_world"><translate x="5"/></transform>
+        <bsdf type="diffuse">
+            <texture type="mtlx" name="reflectance">
+                <string name="filename" value="geometry.mtlx"/>
+                <string name="output" value="NG/out_color"/>
+            </texture>
+        </bsdf>
+    </shape>
+    <emitter type="constant"><rgb name="radiance" value="1, 1, 1"/></emitter>
+</scene>
+"#;
+
+/// Graphs see the hit's world position (not the baking quad's, where x ≤ 1 and the surface
+/// would be black), and nodes that read the surface are never cached as textures over uv:
+/// `all` caches only the uv-only branch and renders what direct evaluation does, and naming a
+/// geometry-dependent node for `nodes:` is an error that says why.
+#[test]
+fn geometry_dependent_nodes_are_evaluated_directly() {
+    let dir = std::env::temp_dir().join(format!("tessera-caching-geometry-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("geometry.mtlx"), GEOMETRY_MTLX).unwrap();
+    std::fs::write(dir.join("geometry.xml"), GEOMETRY_SCENE).unwrap();
+    let scene = render::loader::load_file(&dir.join("geometry.xml"), &[]).unwrap_or_else(|e| panic!("{e}"));
+    let (direct, _) = run(&scene, "none", 1 << 26, 2, 4);
+    // The central pixels see the rectangle: the checkerboard's 1 or 0.5 (black if the graph saw
+    // the baking quad's positions instead of world ones).
+    for y in 8..16 {
+        for x in 8..16 {
+            let p = direct.pixels[y * direct.width as usize + x];
+            let v = (p.x + p.y + p.z) / 3.0;
+            assert!(v > 0.3, "pixel ({x}, {y}) = {v}: the graph did not see world positions");
+        }
+    }
+
+    let nc = NodeCache::new(&scene, &"all".parse().unwrap(), 1 << 26).unwrap().unwrap();
+    let names = nc.cached_node_names(&scene.graphs);
+    assert!(names.contains(&"NG/checks"), "{names:?}");
+    for geometric in ["NG/p", "NG/x", "NG/right"] {
+        assert!(!names.contains(&geometric), "{geometric} reads the surface but is cached: {names:?}");
+    }
+    let (cached, _) = run(&scene, "all", 1 << 26, 2, 4);
+    let e = relative_mse(&cached, &direct);
+    assert!(e < 0.02, "cached render differs from direct evaluation: relMSE {e:.3e}");
+
+    for node in ["right", "NG/p", "x"] {
+        match NodeCache::new(&scene, &format!("nodes:{node}").parse().unwrap(), 1 << 26) {
+            Ok(_) => panic!("nodes:{node} reads the surface's position and must not be cached"),
+            Err(e) => {
+                let e = e.to_string();
+                assert!(e.contains(node) && e.contains("uv alone"), "{e}");
+            }
+        }
+    }
+    assert!(NodeCache::new(&scene, &"nodes:checks".parse().unwrap(), 1 << 26).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,8 +1,14 @@
 //! The `tessera` command: renders Mitsuba 3 scenes (or an embedded demo) and reports where the
 //! time went.
 
+mod bake_cmd;
+mod bench;
+mod flip;
 mod footprint_cmd;
 mod heatmap;
+mod report;
+mod select_cmd;
+mod svg;
 
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
@@ -18,7 +24,7 @@ use std::time::Instant;
 
 /// The demo scene built into the binary, rendered when no scene is given: marble spheres, a
 /// mirror and a glass ball on a marble-tile floor (procedural MaterialX graphs).
-const DEFAULT_SCENE: &str = include_str!("../../../scenes/marble.xml");
+pub(crate) const DEFAULT_SCENE: &str = include_str!("../../../scenes/marble.xml");
 /// The MaterialX document the default scene uses.
 const DEFAULT_SCENE_MTLX: &str = include_str!("../../../scenes/marble.mtlx");
 
@@ -35,6 +41,17 @@ enum Command {
     Render(RenderArgs),
     /// Trace one camera path and print the footprint at each of its vertices.
     Footprint(footprint_cmd::FootprintArgs),
+    /// Evaluate a MaterialX output on a grid of texels over a uv rectangle and write an image.
+    Bake(bake_cmd::BakeArgs),
+    /// Profile a short render: per-node footprint levels, tiles touched and costs (profile.json).
+    Profile(select_cmd::ProfileArgs),
+    /// Choose the nodes to cache from a profile: the fastest predicted plan within a budget.
+    Plan(select_cmd::PlanArgs),
+    /// Analyse a profile: predictions per strategy and node, against measured renders if given.
+    Analyze(select_cmd::AnalyzeArgs),
+    /// Render every scene of a suite with each caching strategy and the free-texture lower bound;
+    /// write results.json, results.md and report.html.
+    Bench(bench::BenchArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -73,10 +90,17 @@ struct RenderArgs {
     /// footprint, 0 = point sampling) or `auto` (narrower as spp grows: max(1/8, 1/sqrt(spp))).
     #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<render::integrator::FilterScale>())]
     filter_scale: render::integrator::FilterScale,
-    /// Which procedural graph nodes are cached as mip-mapped tiles: none, outputs, all, or
-    /// nodes:a,b,c (node names, nodegraph/node).
+    /// Which procedural graph nodes are cached as mip-mapped tiles: none, outputs, all, auto
+    /// (profile, plan, render), nodes:a,b,c (node names, nodegraph/node), plan:FILE or bake:RES.
     #[arg(long, default_value = "none", value_parser = |s: &str| s.parse::<Strategy>())]
     strategy: Strategy,
+    /// With --strategy auto: the share of the final render's samples the profile takes.
+    #[arg(long, default_value_t = select_cmd::DEFAULT_PROFILE_SHARE)]
+    profile_share: f64,
+    /// With --strategy auto: the report folder (profile.json, plan.json, table.md, plots);
+    /// default <out>.report next to the image.
+    #[arg(long)]
+    report: Option<PathBuf>,
     /// Memory budget of the tile cache in MiB (never exceeded).
     #[arg(long, default_value_t = 512.0)]
     budget_mb: f64,
@@ -98,6 +122,11 @@ fn main() {
     let result = match cli.command {
         Command::Render(args) => run_render(args),
         Command::Footprint(args) => footprint_cmd::run(args),
+        Command::Bake(args) => bake_cmd::run(args),
+        Command::Profile(args) => select_cmd::run_profile(args),
+        Command::Plan(args) => select_cmd::run_plan(args),
+        Command::Analyze(args) => select_cmd::run_analyze(args),
+        Command::Bench(args) => bench::run(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -176,8 +205,21 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
         bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", args.budget_mb);
     }
+    let budget = (args.budget_mb * 1048576.0) as usize;
+    if !(args.profile_share > 0.0 && args.profile_share <= 1.0) {
+        bail!("--profile-share must be in (0, 1], got {}", args.profile_share);
+    }
+    let auto = match args.strategy {
+        Strategy::Auto => Some(pool.install(|| {
+            select_cmd::auto_plan(&scene, args.scene.as_deref(), &defines, settings, args.profile_share, budget)
+        })?),
+        _ => None,
+    };
     let t_cache = Instant::now();
-    let node_cache = pool.install(|| NodeCache::new(&scene, &args.strategy, (args.budget_mb * 1048576.0) as usize))?;
+    let node_cache = match &auto {
+        Some(a) => pool.install(|| NodeCache::from_plan(&scene, &a.file, budget))?,
+        None => pool.install(|| NodeCache::new(&scene, &args.strategy, budget))?,
+    };
     let cache_setup_s = t_cache.elapsed().as_secs_f64();
     let out = pool.install(|| render_cached(&scene, settings, node_cache.as_ref(), &|n| bar.inc(n)));
     bar.finish_and_clear();
@@ -232,6 +274,21 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 st.budget_bytes as f64 / 1048576.0
             );
         }
+        if let Some(a) = &auto {
+            eprintln!(
+                "auto: profiled {} samples in {:.2} s, planned in {:.3} s ({}, {} candidates): caching {}",
+                a.profile.render.samples,
+                a.profile_s,
+                a.plan_s,
+                a.result.method,
+                a.result.candidates,
+                if a.file.nodes.is_empty() {
+                    "nothing".to_string()
+                } else {
+                    a.file.nodes.iter().map(|n| n.node.as_str()).collect::<Vec<_>>().join(", ")
+                }
+            );
+        }
         if c.nonfinite_samples > 0 {
             eprintln!("warning: {} samples had NaN or infinite radiance and were discarded", c.nonfinite_samples);
         }
@@ -260,11 +317,12 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 "rays_per_s": total_rays as f64 / render_s,
             },
             "graphs": graph_stats_json(&scene, &out.graph_stats),
+            "plan": auto.as_ref().map(|a| a.stats_json()),
             "cache": node_cache.as_ref().map(|nc| {
                 let st = nc.stats();
                 let t = st.total();
                 json!({
-                    "strategy": format!("{:?}", args.strategy).to_lowercase(),
+                    "strategy": args.strategy.to_string(),
                     "cached_nodes": nc.cached_node_names(&scene.graphs),
                     "budget_bytes": st.budget_bytes,
                     "peak_bytes": st.peak_bytes,
@@ -280,6 +338,48 @@ fn run_render(args: RenderArgs) -> Result<()> {
             }),
         });
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
+    }
+    if let Some(a) = &auto {
+        let measured = select_cmd::Measured {
+            evaluations: out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64,
+            render_s,
+            ..node_cache.as_ref().map_or_else(select_cmd::Measured::default, |nc| {
+                let st = nc.stats();
+                let t = st.total();
+                select_cmd::Measured {
+                    lookups: st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64,
+                    tiles_filled: t.fills as f64,
+                    texels_filled: t.texels_filled as f64,
+                    peak_bytes: st.peak_bytes as f64,
+                    ..Default::default()
+                }
+            })
+        };
+        let rows = vec![("auto".to_string(), a.result.prediction.clone(), measured)];
+        let model = plan::Model::new(&a.profile, a.target)?;
+        let md = format!(
+            "# --strategy auto\n\nProfile: {} samples in {:.2} s; plan: {} ({} candidates, {} plans predicted) in {:.3} s.\n\n## Predicted per strategy\n\n{}\n## Per node (plan)\n\n{}\n## Predicted against measured\n\n{}",
+            a.profile.render.samples,
+            a.profile_s,
+            a.result.method,
+            a.result.candidates,
+            a.result.plans_evaluated,
+            a.plan_s,
+            select_cmd::prediction_table(&model, &select_cmd::standard_rows(&a.profile, &a.result.plan)),
+            select_cmd::node_table(&a.profile, &a.result.prediction, &a.result.plan),
+            select_cmd::comparison_table(&rows)
+        );
+        let dir = args.report.clone().unwrap_or_else(|| {
+            let stem = outputs[0].with_extension("");
+            PathBuf::from(format!("{}.report", stem.display()))
+        });
+        select_cmd::write_report(&dir, &a.profile, &md, &rows)?;
+        write_atomic(&dir.join("profile.json"), a.profile.to_json().as_bytes())?;
+        write_atomic(&dir.join("plan.json"), a.file.to_json().as_bytes())?;
+        if !args.quiet {
+            eprintln!("{}", select_cmd::comparison_table(&rows));
+            eprintln!("report: {}", dir.display());
+        }
     }
     Ok(())
 }

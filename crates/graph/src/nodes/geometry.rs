@@ -1,29 +1,77 @@
-//! Coordinates and constants: `texcoord`, `constant`, `place2d`, `rotate2d`, `dot`.
+//! Coordinates, geometry and constants: `texcoord`, `position`, `normal`, `tangent`,
+//! `bitangent`, `geompropvalue`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
+//! `transformpoint`, `transformvector`, `transformnormal`, `dot`.
 //!
 //! | node | inputs (default) | filtered evaluation |
 //! |---|---|---|
-//! | `texcoord` | `index` (0) | mean `uv`, gradient the identity, variance `diag Σ` (exact) |
+//! | `texcoord` | `index` (0) | mean `uv`, gradient the identity, variance `diag Σ` (exact); vector3: third channel 0. tessera's shapes carry one uv set: `index` > 0 reads it too, with a warning |
+//! | `position` | `space` (`object`) | mean `P`, per channel gradient `(∂Pᵢ/∂u, ∂Pᵢ/∂v)` and variance `gᵢᵀ Σ gᵢ` (exact to first order: the 3D footprint `J Σ Jᵀ`) |
+//! | `normal` | `space` (`object`) | mean `N`, gradients from `∂N/∂u`, `∂N/∂v`, variance as `position` |
+//! | `tangent`, `bitangent` | `space` (`object`), `index` (0) | the frame vector at the centre, zero spread (its variation across a footprint is not tracked) |
+//! | `geompropvalue` | `geomprop` (string), `default` (0) | uv sets (`UV0`, `uv`, `st`, `texcoord`, …) as `texcoord`; `P`/`position`/`Pobject`/`Pworld`, `N`/`normal`/…, `tangent`/…, `bitangent`/… (vector3) as those nodes; any other name (or type) gives `default`, with a warning |
 //! | `constant` | `value` (0) | exact, zero spread |
 //! | `place2d` | `texcoord` (UV0), `pivot` (0,0), `scale` (1,1), `rotate` (0°), `offset` (0,0), `operationorder` (0 = SRT) | affine in `texcoord`: exact when the other inputs are uniform, cubature otherwise |
 //! | `rotate2d` | `in` (0,0), `amount` (0°) | linear: exact for uniform `amount` |
+//! | `rotate3d` | `in` (0,0,0), `amount` (0°), `axis` (0,1,0) | linear: exact for uniform `amount` and `axis`; cubature otherwise |
+//! | `transformpoint`, `transformvector` | `in` (0,0,0), `fromspace`, `tospace` | identity (exact) |
+//! | `transformnormal` | `in` (0,0,1), `fromspace`, `tospace` | `normalize(in)` (MaterialX normalises), by cubature |
 //! | `dot` | `in` (0) | pass-through |
+//!
+//! Spaces: tessera transforms meshes and shapes to world space at load and keeps no object
+//! transform, so `object`, `model` and `world` are one space here: `position` and `normal`
+//! give world-space values whatever `space` says, and the transform nodes between these spaces
+//! are the identity (`transformnormal` still normalises, as MaterialX does). Any other space
+//! name is an error. Without surface geometry (a footprint built by [`Footprint::new`]) the
+//! geometry is MaterialX's flat baking quad ([`crate::value::Geometry::flat_quad`]).
 //!
 //! `place2d` follows MaterialX's nodegraph: SRT is `((t − pivot) / scale)` rotated by `rotate`
 //! degrees (`rotate2d`: `(c x + s y, −s x + c y)`), minus `offset`, plus `pivot`; TRS subtracts
-//! `offset` before rotating and divides by `scale` after.
+//! `offset` before rotating and divides by `scale` after. `rotate3d` applies the transpose of
+//! the right-handed rotation by `amount` degrees about the normalised `axis` (as GLSL reads
+//! MaterialX's row-written matrix): like `rotate2d`, a rotation by `−amount`.
+//!
+//! [`Footprint::new`]: crate::value::Footprint::new
 
-use super::{inp, types, Ctx, Def, InType, NodeDef, Op};
+use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
+use crate::graph::{GeomProp, Source};
 use crate::moments::{self, add_scaled, affine};
 use crate::value::{Filtered, Moments, ValueType};
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 
-pub(crate) const CATEGORIES: &[&str] = &["texcoord", "constant", "place2d", "rotate2d", "dot"];
+pub(crate) const CATEGORIES: &[&str] = &[
+    "texcoord",
+    "position",
+    "normal",
+    "tangent",
+    "bitangent",
+    "geompropvalue",
+    "constant",
+    "place2d",
+    "rotate2d",
+    "rotate3d",
+    "transformpoint",
+    "transformvector",
+    "transformnormal",
+    "dot",
+];
 
 /// Geometry operations.
 #[derive(Debug)]
 pub enum GeometryOp {
-    /// `texcoord`
-    Texcoord,
+    /// `texcoord`, with the warning for a uv set tessera does not have.
+    Texcoord(Option<String>),
+    /// `position`, `normal`, `tangent`, `bitangent`, and `geompropvalue` naming one of them.
+    Prop(GeomProp),
+    /// `geompropvalue` of a uv set.
+    PropUv,
+    /// `geompropvalue` that tessera cannot provide: its `default`, and why.
+    PropDefault(String),
+    /// `rotate3d`
+    Rotate3d,
+    /// `transformpoint`, `transformvector` (identity between tessera's spaces).
+    Identity,
+    /// `transformnormal`
+    TransformNormal,
     /// `constant`
     Constant,
     /// `place2d`
@@ -37,9 +85,13 @@ pub enum GeometryOp {
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     use Def::*;
     use InType::*;
-    let (inputs, types): (&'static [_], fn(ValueType) -> bool) = match category {
-        "texcoord" => (&[inp!("index", Int, Zero)], |t| matches!(t, ValueType::Vector2 | ValueType::Vector3)),
-        "constant" => (&[inp!("value", Out, Zero)], types::numeric),
+    let v3 = |t: ValueType| t == ValueType::Vector3;
+    let (inputs, params, types): (&'static [_], &'static [&'static str], fn(ValueType) -> bool) = match category {
+        "texcoord" => (&[inp!("index", Int, Zero)], &[], |t| matches!(t, ValueType::Vector2 | ValueType::Vector3)),
+        "position" | "normal" => (&[], &["space"], v3),
+        "tangent" | "bitangent" => (&[inp!("index", Int, Zero)], &["space"], v3),
+        "geompropvalue" => (&[inp!("default", Out, Zero)], &["geomprop"], types::numeric),
+        "constant" => (&[inp!("value", Out, Zero)], &[], types::numeric),
         "place2d" => (
             &[
                 inp!("texcoord", V2, Uv),
@@ -49,30 +101,144 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
                 inp!("offset", V2, Zero),
                 inp!("operationorder", Int, Zero),
             ],
+            &[],
             types::vector2,
         ),
-        "rotate2d" => (&[inp!("in", V2, Zero), inp!("amount", Float, Zero)], types::vector2),
-        "dot" => (&[inp!("in", Out, Zero)], types::numeric),
+        "rotate2d" => (&[inp!("in", V2, Zero), inp!("amount", Float, Zero)], &[], types::vector2),
+        "rotate3d" => {
+            (&[inp!("in", V3, Zero), inp!("amount", Float, Zero), inp!("axis", V3, Triple(0.0, 1.0, 0.0))], &[], v3)
+        }
+        "transformpoint" | "transformvector" => (&[inp!("in", V3, Zero)], &["fromspace", "tospace"], v3),
+        "transformnormal" => (&[inp!("in", V3, Triple(0.0, 0.0, 1.0))], &["fromspace", "tospace"], v3),
+        "dot" => (&[inp!("in", Out, Zero)], &[], types::numeric),
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
-    Some(NodeDef { category, inputs, params: &[], types, build })
+    Some(NodeDef { category, inputs, params, types, build })
 }
 
-fn build(
-    category: &str,
-    _: ValueType,
-    _: &[ValueType],
-    _: &[crate::graph::Source],
-    _: &[super::Param],
-) -> Result<Op, String> {
+/// The value of string input `name`, if given.
+fn param<'a>(params: &'a [Param], name: &str) -> Option<&'a str> {
+    params.iter().find_map(|p| match p {
+        Param::Str { name: n, value } if n == name => Some(value.as_str()),
+        _ => None,
+    })
+}
+
+/// Checks a `space` string: tessera's object, model and world spaces are one.
+fn check_space(params: &[Param], name: &str) -> Result<(), String> {
+    match param(params, name).map(str::trim) {
+        None | Some("") | Some("object") | Some("model") | Some("world") => Ok(()),
+        Some(other) => Err(format!(
+            "{name} `{other}` is not supported: tessera knows `object`, `model` and `world` (one space, as meshes \
+             are transformed to world space at load)"
+        )),
+    }
+}
+
+/// The geometric property a `geompropvalue` name reads, if tessera provides it.
+enum Named {
+    Uv,
+    Prop(GeomProp),
+}
+
+fn classify_geomprop(name: &str) -> Option<Named> {
+    Some(match name.trim().to_ascii_lowercase().as_str() {
+        "uv0" | "uv" | "st" | "st0" | "texcoord" | "texcoord0" | "texcoord_0" | "uvmap" => Named::Uv,
+        "p" | "position" | "pobject" | "pworld" => Named::Prop(GeomProp::Position),
+        "n" | "normal" | "nobject" | "nworld" => Named::Prop(GeomProp::Normal),
+        "tangent" | "tobject" | "tworld" => Named::Prop(GeomProp::Tangent),
+        "bitangent" | "bobject" | "bworld" => Named::Prop(GeomProp::Bitangent),
+        _ => return None,
+    })
+}
+
+fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params: &[Param]) -> Result<Op, String> {
+    let constant_index = |s: &Source| match s {
+        Source::Constant(v) => Ok(v.v[0].round() as i32),
+        _ => Err("`index` must be a uniform value".to_string()),
+    };
     Ok(Op::Geometry(match category {
-        "texcoord" => GeometryOp::Texcoord,
+        "texcoord" => {
+            let index = constant_index(&srcs[0])?;
+            let warning = (index != 0).then(|| {
+                format!("uv set {index} read as uv set 0 (tessera's shapes carry one set of texture coordinates)")
+            });
+            GeometryOp::Texcoord(warning)
+        }
+        "position" | "normal" | "tangent" | "bitangent" => {
+            check_space(params, "space")?;
+            GeometryOp::Prop(match category {
+                "position" => GeomProp::Position,
+                "normal" => GeomProp::Normal,
+                "tangent" => GeomProp::Tangent,
+                _ => GeomProp::Bitangent,
+            })
+        }
+        "geompropvalue" => {
+            let name = param(params, "geomprop").unwrap_or("");
+            match classify_geomprop(name) {
+                Some(Named::Uv) if matches!(ty, ValueType::Vector2 | ValueType::Vector3) => GeometryOp::PropUv,
+                Some(Named::Prop(p)) if ty == ValueType::Vector3 => GeometryOp::Prop(p),
+                Some(_) => GeometryOp::PropDefault(format!(
+                    "geomprop `{name}` cannot be read as a {ty}; the node gives its `default`"
+                )),
+                None => GeometryOp::PropDefault(format!(
+                    "geomprop `{name}` is not provided by tessera (it knows uv sets, position, normal, tangent and \
+                     bitangent); the node gives its `default`"
+                )),
+            }
+        }
         "constant" => GeometryOp::Constant,
         "place2d" => GeometryOp::Place2d,
         "rotate2d" => GeometryOp::Rotate2d,
+        "rotate3d" => GeometryOp::Rotate3d,
+        "transformpoint" | "transformvector" | "transformnormal" => {
+            check_space(params, "fromspace")?;
+            check_space(params, "tospace")?;
+            if category == "transformnormal" {
+                GeometryOp::TransformNormal
+            } else {
+                GeometryOp::Identity
+            }
+        }
         _ => GeometryOp::Dot,
     }))
+}
+
+/// Whether the operation reads geometry beyond uv.
+pub(crate) fn reads_geometry(op: &GeometryOp) -> bool {
+    matches!(op, GeometryOp::Prop(_) | GeometryOp::PropDefault(_))
+}
+
+/// The operation's load-time warning, if any.
+pub(crate) fn warning(op: &GeometryOp) -> Option<String> {
+    match op {
+        GeometryOp::Texcoord(w) => w.clone(),
+        GeometryOp::PropDefault(w) => Some(w.clone()),
+        _ => None,
+    }
+}
+
+/// A vector3 whose channels are linear in uv with the given value and uv derivatives.
+fn linear3(value: Vec3, du: Vec3, dv: Vec3, ctx: &Ctx) -> Filtered {
+    let mut f = Filtered::zero(ValueType::Vector3);
+    for k in 0..3 {
+        let g = Vec2::new(du[k], dv[k]);
+        f.ch[k] = Moments { mean: value[k], grad: g, var: ctx.fp.quad(g, g).max(0.0) };
+    }
+    f
+}
+
+/// The filtered geometric property at the footprint.
+pub(crate) fn geomprop(prop: GeomProp, ctx: &Ctx) -> Filtered {
+    let g = &ctx.fp.geom;
+    match prop {
+        GeomProp::Position => linear3(g.p, g.dpdu, g.dpdv, ctx),
+        GeomProp::Normal => linear3(g.n, g.dndu, g.dndv, ctx),
+        GeomProp::Tangent => linear3(g.t, Vec3::ZERO, Vec3::ZERO, ctx),
+        GeomProp::Bitangent => linear3(g.b, Vec3::ZERO, Vec3::ZERO, ctx),
+    }
 }
 
 /// The filtered texture coordinate itself.
@@ -98,11 +264,16 @@ fn uniform(ins: &[Filtered], idx: &[usize]) -> bool {
 
 pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     match op {
-        GeometryOp::Texcoord => {
+        GeometryOp::Texcoord(_) | GeometryOp::PropUv => {
             let mut f = texcoord(ctx);
             f.ty = ty;
             f
         }
+        GeometryOp::Prop(p) => geomprop(*p, ctx),
+        GeometryOp::PropDefault(_) => ins[0],
+        GeometryOp::Identity => ins[0],
+        GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
+        GeometryOp::Rotate3d => rotate3d(ins, ctx),
         GeometryOp::Constant | GeometryOp::Dot => ins[0],
         GeometryOp::Rotate2d => {
             let mut out = Filtered::zero(ValueType::Vector2);
@@ -163,6 +334,48 @@ fn place2d(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     ];
     for k in 0..2 {
         out.ch[k] = moments::nary(&xs, |p| place2d_point(p)[k]);
+    }
+    out
+}
+
+/// MaterialX `rotate3d`'s matrix: the transpose of the right-handed rotation by `deg` degrees
+/// about `axis` (normalised; a zero axis leaves vectors unchanged). Row-major: `out = M · in`.
+pub(crate) fn rotate3d_matrix(axis: [f64; 3], deg: f64) -> [[f64; 3]; 3] {
+    let len = (axis[0] * axis[0] + axis[1] * axis[1] + axis[2] * axis[2]).sqrt();
+    if !(len > 0.0 && len.is_finite()) {
+        return [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    }
+    let (x, y, z) = (axis[0] / len, axis[1] / len, axis[2] / len);
+    let (s, c) = deg.to_radians().sin_cos();
+    let oc = 1.0 - c;
+    // Rodrigues' R, transposed.
+    [
+        [oc * x * x + c, oc * x * y + z * s, oc * z * x - y * s],
+        [oc * x * y - z * s, oc * y * y + c, oc * y * z + x * s],
+        [oc * z * x + y * s, oc * y * z - x * s, oc * z * z + c],
+    ]
+}
+
+fn rotate3d(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let v = &ins[0];
+    let mut out = Filtered::zero(ValueType::Vector3);
+    if ins[1].is_uniform() && ins[2].is_uniform() {
+        let a = &ins[2];
+        let m =
+            rotate3d_matrix([a.ch[0].mean as f64, a.ch[1].mean as f64, a.ch[2].mean as f64], ins[1].ch[0].mean as f64);
+        for (k, row) in m.iter().enumerate() {
+            let acc = affine(v.ch[0], row[0] as f32, 0.0);
+            let acc = add_scaled(acc, v.ch[1], row[1] as f32, ctx.fp);
+            out.ch[k] = add_scaled(acc, v.ch[2], row[2] as f32, ctx.fp);
+        }
+        return out;
+    }
+    let xs = [v.ch[0], v.ch[1], v.ch[2], ins[1].ch[0], ins[2].ch[0], ins[2].ch[1], ins[2].ch[2]];
+    for k in 0..3 {
+        out.ch[k] = moments::nary(&xs, |p| {
+            let m = rotate3d_matrix([p[4], p[5], p[6]], p[3]);
+            m[k][0] * p[0] + m[k][1] * p[1] + m[k][2] * p[2]
+        });
     }
     out
 }

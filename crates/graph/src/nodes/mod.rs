@@ -12,15 +12,19 @@ pub(crate) mod hash;
 pub(crate) mod image;
 pub(crate) mod math;
 pub(crate) mod noise;
+pub(crate) mod noise3d;
 pub(crate) mod normal;
 pub(crate) mod pattern;
 pub(crate) mod shape;
 
 use crate::eval::Work;
-use crate::graph::Source;
+use crate::graph::{GeomProp, Source};
 use crate::value::{Filtered, Footprint, Value, ValueType};
 use std::path::PathBuf;
 use std::sync::Arc;
+
+/// The most inputs a node definition has (`ramp`: 24).
+pub(crate) const MAX_INPUTS: usize = 24;
 
 /// A uniform string-like input of a node (file names, address modes, ...).
 #[derive(Clone, Debug, PartialEq)]
@@ -85,8 +89,12 @@ pub enum Def {
     Pair(f32, f32),
     /// A three-channel value.
     Triple(f32, f32, f32),
+    /// A four-channel value.
+    Quad(f32, f32, f32, f32),
     /// The geometric texture coordinate `UV0`.
     Uv,
+    /// A geometric property (`Pobject`, `Nobject`, ...).
+    Geom(GeomProp),
 }
 
 /// One input of a node definition.
@@ -132,7 +140,9 @@ impl InputSpec {
             Def::Splat(x) => Value::splat(ty, x),
             Def::Pair(a, b) => Value::new(ValueType::Vector2, &[a, b]),
             Def::Triple(a, b, c) => Value::new(ty, &[a, b, c]),
+            Def::Quad(a, b, c, d) => Value::new(ty, &[a, b, c, d]),
             Def::Uv => return Source::Texcoord,
+            Def::Geom(g) => return Source::Geometry(g),
         };
         Source::Constant(v)
     }
@@ -198,10 +208,13 @@ pub struct NodeDef {
 /// The operation of a node, grouped by family.
 #[derive(Debug)]
 pub enum Op {
-    /// `texcoord`, `constant`, `place2d`, `rotate2d`, `dot`.
+    /// `texcoord`, `position`, `normal`, `tangent`, `bitangent`, `geompropvalue`, `constant`,
+    /// `place2d`, `rotate2d`, `rotate3d`, `transform*`, `dot`.
     Geometry(geometry::GeometryOp),
     /// `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`, `unifiednoise2d`.
     Noise(noise::NoiseOp),
+    /// `noise3d`, `fractal3d`, `cellnoise3d`, `worleynoise3d`, `unifiednoise3d`.
+    Noise3d(noise3d::Noise3dOp),
     /// Shapes, ramps, splits, random values.
     Pattern(pattern::PatternOp),
     /// `circle`, `line`, `hexagon`, `grid`, `crosshatch`, `tiledcircles`, `tiledhexagons`.
@@ -231,6 +244,7 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
     match op {
         Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
         Op::Noise(n) => noise::eval(n, ty, ins, ctx),
+        Op::Noise3d(n) => noise3d::eval(n, ty, ins, ctx),
         Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
         Op::Shape(s) => shape::eval(s, ty, ins, ctx),
         Op::Math(m) => math::eval(m, ty, ins, ctx),
@@ -241,12 +255,30 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
     }
 }
 
+/// Whether the operation itself reads the shading point's geometry beyond uv (position, normal,
+/// tangent, bitangent).
+pub(crate) fn reads_geometry(op: &Op) -> bool {
+    match op {
+        Op::Geometry(g) => geometry::reads_geometry(g),
+        _ => false,
+    }
+}
+
+/// A warning about a node that loads but cannot do what it asks.
+pub(crate) fn warning(op: &Op) -> Option<String> {
+    match op {
+        Op::Geometry(g) => geometry::warning(g),
+        _ => None,
+    }
+}
+
 /// Every category this library supports.
 pub fn supported() -> Vec<&'static str> {
     let mut v: Vec<&'static str> = Vec::new();
     for f in [
         geometry::CATEGORIES,
         noise::CATEGORIES,
+        noise3d::CATEGORIES,
         pattern::CATEGORIES,
         shape::CATEGORIES,
         math::CATEGORIES,
@@ -270,6 +302,7 @@ pub fn supported_list() -> String {
 pub fn definition(category: &str) -> Option<NodeDef> {
     geometry::definition(category)
         .or_else(|| noise::definition(category))
+        .or_else(|| noise3d::definition(category))
         .or_else(|| pattern::definition(category))
         .or_else(|| shape::definition(category))
         .or_else(|| math::definition(category))

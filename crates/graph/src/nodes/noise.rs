@@ -122,7 +122,7 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], _: &[P
 // Unfiltered MaterialX Perlin noise (f32, as GLSL computes it).
 
 #[inline]
-fn fade(t: f32) -> f32 {
+pub(super) fn fade(t: f32) -> f32 {
     t * t * t * (t * (t * 6.0 - 15.0) + 10.0)
 }
 
@@ -214,7 +214,7 @@ impl HashSel {
 
 /// The gradient vector of MaterialX's 3D `mx_gradient_float(hash, x, y, z)`.
 #[inline]
-fn gradient3_vector(h: u32) -> [f64; 3] {
+pub(super) fn gradient3_vector(h: u32) -> [f64; 3] {
     let h = h & 15;
     let mut g = [0.0; 3];
     let u = if h < 8 { 0 } else { 1 };
@@ -231,7 +231,7 @@ fn gradient3_vector(h: u32) -> [f64; 3] {
 }
 
 #[inline]
-fn gradient3(h: u32, x: f32, y: f32, z: f32) -> f32 {
+pub(super) fn gradient3(h: u32, x: f32, y: f32, z: f32) -> f32 {
     let h = h & 15;
     let u = if h < 8 { x } else { y };
     let v = if h < 4 {
@@ -259,7 +259,7 @@ pub fn perlin3_float(p: [f32; 3]) -> f32 {
     GRADIENT_SCALE_3D * r
 }
 
-const GRADIENT_SCALE_3D: f32 = 0.9820;
+pub(super) const GRADIENT_SCALE_3D: f32 = 0.9820;
 /// Variance of a `z = const` slice of MaterialX's 3D Perlin noise over the plane (measured,
 /// averaged over `z`).
 pub const PERLIN3_SLICE_VARIANCE: f64 = 0.072;
@@ -347,16 +347,16 @@ fn kernel() -> &'static Kernel {
 
 /// 1D expectations for lattice coordinate `c`: E[W], E[dW], dE[W]/dm, dE[dW]/dm.
 #[derive(Clone, Copy, Default)]
-struct AxisTerms {
-    w: f64,
-    dw: f64,
-    w1: f64,
-    dw1: f64,
+pub(super) struct AxisTerms {
+    pub w: f64,
+    pub dw: f64,
+    pub w1: f64,
+    pub dw1: f64,
 }
 
 /// The terms of every lattice coordinate `c` in `lo..=hi`, sharing the tail moments at the
 /// integer piece boundaries between coordinates.
-fn axis_terms(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); MAX_AXIS]) -> usize {
+pub(super) fn axis_terms(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); MAX_AXIS]) -> usize {
     let k = kernel();
     let mut tails = [gaussian::TailMoments::at(0.0); MAX_AXIS + 2];
     let nb = ((hi - lo + 3) as usize).min(MAX_AXIS + 2);
@@ -381,7 +381,7 @@ fn axis_terms(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); MAX
     n
 }
 
-const MAX_AXIS: usize = 8;
+pub(super) const MAX_AXIS: usize = 8;
 
 /// Filtered Perlin noise for up to 3 hash selections at once: per channel (value, ∂/∂x, ∂/∂y).
 /// `s` are the per-axis spreads, each ≤ [`PERLIN_SIGMA_EXACT`].

@@ -1,4 +1,4 @@
-//! Shapes, ramps, splits and random values: `checkerboard`, `ramplr`, `ramptb`, `ramp4`,
+//! Shapes, ramps, splits and random values: `checkerboard`, `ramplr`, `ramptb`, `ramp4`, `ramp`,
 //! `splitlr`, `splittb`, `randomfloat`, `randomcolor`.
 //!
 //! | node | inputs (default) | unfiltered | filtered evaluation |
@@ -6,10 +6,22 @@
 //! | `checkerboard` | `color1` (1,1,1), `color2` (0,0,0), `uvtiling` (8,8), `uvoffset` (0,0), `texcoord` (UV0) | `color1` where `floor(u')+floor(v')` is odd, `color2` where even; `u' = t·tiling − offset` | product of the two axes' square-wave expectations (step masses for σ < 0.4 cells, damped Fourier series above; nothing evaluated above 3.5 cells); exact for axis-aligned footprints |
 //! | `ramplr` / `ramptb` | `valuel`,`valuer` / `valuet`,`valueb` (0), `texcoord` | `mix(l, r, clamp(u, 0, 1))` / `mix(b, t, clamp(v, 0, 1))` | closed-form moments of the clamped coordinate (piecewise polynomial × Gaussian) |
 //! | `ramp4` | `valuetl`,`valuetr`,`valuebl`,`valuebr` (0), `texcoord` | bilinear in the clamped coordinates | as the ramps, per axis |
+//! | `ramp` (color4) | `texcoord` (UV0), `type` (0), `interpolation` (1), `num_intervals` (2), `interval1` (0), `color1` (0,0,0,1), `interval2`…`interval10` (1), `color2`…`color10` (1,1,1,1) | see below | the ramp is a piecewise polynomial `f(x)` (degree ≤ 3) of one coordinate `x`: exact closed-form mean, variance and slope of `f(X)` for Gaussian `X` (piece moments plus the jumps' densities); `x` is exactly Gaussian for `type` 0 (`u`), and for types 1–3 its mean and variance come from cubature over the texcoord's spread (radial: unwrapped around the centre's angle and the ramp extended periodically) |
 //! | `splitlr` / `splittb` | `valuel`,`valuer` / `valuet`,`valueb` (0), `center` (0.5), `texcoord` | `valuer` where `u ≥ center` / `valuet` where `v ≥ center` | the footprint's mass beyond the split, `Φ((m − c)/σ)` |
 //! | `randomfloat` | `in` (0), `min` (0), `max` (1), `seed` (0) | cell noise of `(in, seed)` mapped to `[min, max]` | evaluated at the mean of `in` (a per-object value, normally uniform) |
 //! | `randomcolor` | `in` (0), `huelow` (0), `huehigh` (1), `saturationlow` (0), `saturationhigh` (1), `brightnesslow` (0), `brightnesshigh` (1), `seed` (0) | HSV from three cell-noise values of `(in, seed + k)` | as `randomfloat` |
 
+//!
+//! `ramp` is MaterialX 1.39's gradient (its `NG_ramp` graph): `x` is `u` (`type` 0, standard),
+//! `atan2(u − ½, v − ½)/6.28319 + ½` (1, radial), `1.414·|uv − ½|` (2, circular) or
+//! `2·max(|u − ½|, |v − ½|)` (3, box; any other type gives `x = 0`). Starting from `color1`, each
+//! interval `k = 1…9` with `k < num_intervals` replaces the colour where `x > interval_k` by
+//! `mix(color_k, color_k+1, t)`: `t` = `(clamp(x, i_k, i_k+1) − i_k)/(i_k+1 − i_k)` (`interpolation`
+//! 0, linear), `smoothstep(i_k, i_k+1, x)` (1, smooth), or `color_k` below `i_k+1` and
+//! `color_k+1` from it (2, step); other interpolations give zero. An empty or reversed interval
+//! (`i_k+1 ≤ i_k`, where MaterialX divides by zero) gives `color_k+1`. Intervals, counts and
+//! modes are read at their filtered mean (they are uniform in practice); colours that vary add
+//! their own slope and spread, weighted by each colour's filtered weight.
 use super::hash::cell_float;
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{self, poly, Piece};
@@ -19,7 +31,7 @@ use crate::value::{Filtered, Moments, ValueType};
 use glam::Vec2;
 
 pub(crate) const CATEGORIES: &[&str] =
-    &["checkerboard", "ramplr", "ramptb", "ramp4", "splitlr", "splittb", "randomfloat", "randomcolor"];
+    &["checkerboard", "ramplr", "ramptb", "ramp4", "ramp", "splitlr", "splittb", "randomfloat", "randomcolor"];
 
 /// Pattern operations.
 #[derive(Debug)]
@@ -32,6 +44,8 @@ pub enum PatternOp {
     RampTb,
     /// `ramp4`
     Ramp4,
+    /// `ramp`
+    Ramp,
     /// `splitlr`
     SplitLr,
     /// `splittb`
@@ -71,6 +85,35 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
                 inp!("texcoord", V2, Uv),
             ],
             types::float_or_vector,
+        ),
+        "ramp" => (
+            &[
+                inp!("texcoord", V2, Uv),
+                inp!("type", Int, Zero),
+                inp!("interpolation", Int, One),
+                inp!("num_intervals", Int, Splat(2.0)),
+                inp!("interval1", Float, Zero),
+                inp!("color1", Out, Quad(0.0, 0.0, 0.0, 1.0)),
+                inp!("interval2", Float, One),
+                inp!("color2", Out, One),
+                inp!("interval3", Float, One),
+                inp!("color3", Out, One),
+                inp!("interval4", Float, One),
+                inp!("color4", Out, One),
+                inp!("interval5", Float, One),
+                inp!("color5", Out, One),
+                inp!("interval6", Float, One),
+                inp!("color6", Out, One),
+                inp!("interval7", Float, One),
+                inp!("color7", Out, One),
+                inp!("interval8", Float, One),
+                inp!("color8", Out, One),
+                inp!("interval9", Float, One),
+                inp!("color9", Out, One),
+                inp!("interval10", Float, One),
+                inp!("color10", Out, One),
+            ],
+            |t| t == ValueType::Color4,
         ),
         "splitlr" => (
             &[
@@ -119,11 +162,352 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "ramplr" => PatternOp::RampLr,
         "ramptb" => PatternOp::RampTb,
         "ramp4" => PatternOp::Ramp4,
+        "ramp" => PatternOp::Ramp,
         "splitlr" => PatternOp::SplitLr,
         "splittb" => PatternOp::SplitTb,
         "randomfloat" => PatternOp::RandomFloat,
         _ => PatternOp::RandomColor,
     }))
+}
+
+mod ramp {
+    //! MaterialX's `ramp`: its unfiltered value and the closed-form moments of its colour over a
+    //! Gaussian coordinate.
+
+    use super::Ctx;
+    use crate::gaussian::{self, poly, poly_deriv, poly_eval, poly_expectation, poly_mul, poly_shift_scale, Poly};
+    use crate::moments::{self, chain};
+    use crate::value::{Filtered, Moments, ValueType};
+    use glam::Vec2;
+
+    /// The ramp's uniform settings: `x`'s kind, interpolation, active intervals, positions and
+    /// colours.
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Spec {
+        pub kind: i32,
+        pub interp: i32,
+        /// `num_intervals` (the intervals `k < num_intervals` apply).
+        pub count: i32,
+        pub at: [f64; 10],
+        pub color: [[f64; 4]; 10],
+    }
+
+    /// MaterialX's constant in the radial type (`atan2 / 6.28319`).
+    const TWO_PI_MX: f64 = 6.28319;
+
+    /// The ramp coordinate `x` at uv `(u, v)` for `kind`.
+    pub(crate) fn coordinate(kind: i32, u: f64, v: f64) -> f64 {
+        let (du, dv) = (u - 0.5, v - 0.5);
+        match kind {
+            k if k < 1 => u,
+            1 => du.atan2(dv) / TWO_PI_MX + 0.5,
+            2 => (du * 1.414).hypot(dv * 1.414),
+            3 => {
+                let (ax, ay) = (du.abs(), dv.abs());
+                if ax > ay {
+                    2.0 * ax
+                } else {
+                    2.0 * ay
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
+    impl Spec {
+        /// The last interval that applies (1-based; 0: none, the ramp is `color1`).
+        fn last(&self) -> usize {
+            (self.count - 1).clamp(0, 9) as usize
+        }
+
+        /// Interval `k` (1-based) as `(lo, hi, color lo, color hi)`.
+        fn interval(&self, k: usize) -> (f64, f64, [f64; 4], [f64; 4]) {
+            (self.at[k - 1], self.at[k], self.color[k - 1], self.color[k])
+        }
+
+        /// The blend weight `t` of interval `k` at `x > lo`, and whether it is constant there.
+        fn weight(&self, k: usize, x: f64) -> f64 {
+            let (lo, hi, _, _) = self.interval(k);
+            match self.interp {
+                i if i < 2 => {
+                    if hi <= lo || x >= hi {
+                        1.0
+                    } else {
+                        let y = (x - lo) / (hi - lo);
+                        if i < 1 {
+                            y
+                        } else {
+                            y * y * (3.0 - 2.0 * y)
+                        }
+                    }
+                }
+                2 => {
+                    if hi > x {
+                        0.0
+                    } else {
+                        1.0
+                    }
+                }
+                _ => f64::NAN,
+            }
+        }
+
+        /// The unfiltered ramp at coordinate `x` (MaterialX's chain of `ramp_gradient`s).
+        pub(crate) fn at_x(&self, x: f64) -> [f64; 4] {
+            let mut c = self.color[0];
+            for k in 1..=self.last() {
+                let (lo, _, c0, c1) = self.interval(k);
+                if x > lo {
+                    let t = self.weight(k, x);
+                    c = if t.is_nan() { [0.0; 4] } else { std::array::from_fn(|i| c0[i] + (c1[i] - c0[i]) * t) };
+                }
+            }
+            c
+        }
+
+        /// The ramp as polynomial pieces of `x`: `(lo, hi, channel polynomials)` over the whole line.
+        fn pieces(&self, out: &mut [(f64, f64, [Poly; 4]); 12]) -> usize {
+            let last = self.last();
+            let mut cuts = [0.0f64; 10];
+            let mut nc = 0;
+            for &a in &self.at[..=last.min(9)] {
+                if a.is_finite() && !cuts[..nc].contains(&a) {
+                    cuts[nc] = a;
+                    nc += 1;
+                }
+            }
+            cuts[..nc].sort_by(f64::total_cmp);
+            let mut n = 0;
+            for j in 0..=nc {
+                let lo = if j == 0 { f64::NEG_INFINITY } else { cuts[j - 1] };
+                let hi = if j == nc { f64::INFINITY } else { cuts[j] };
+                let probe = match (lo.is_finite(), hi.is_finite()) {
+                    (true, true) => 0.5 * (lo + hi),
+                    (false, true) => hi - 1.0,
+                    (true, false) => lo + 1.0,
+                    (false, false) => 0.0,
+                };
+                // The interval that sets the colour here: the last applying one with x > lo.
+                let k = (1..=last).rev().find(|&k| probe > self.at[k - 1]);
+                let mut ps = [poly(&[0.0]); 4];
+                match k {
+                    None => {
+                        for (p, c) in ps.iter_mut().zip(self.color[0]) {
+                            *p = poly(&[c]);
+                        }
+                    }
+                    Some(k) => {
+                        let (lo_k, hi_k, c0, c1) = self.interval(k);
+                        // t(x) as a polynomial on this piece.
+                        let t = match self.interp {
+                            i if i < 2 && hi_k > lo_k && probe < hi_k => {
+                                let (m, s) = (-lo_k / (hi_k - lo_k), 1.0 / (hi_k - lo_k));
+                                let y = if i < 1 { poly(&[0.0, 1.0]) } else { poly(&[0.0, 0.0, 3.0, -2.0]) };
+                                Some(poly_shift_scale(&y, m, s))
+                            }
+                            i if i < 3 => Some(poly(&[self.weight(k, probe)])),
+                            _ => None,
+                        };
+                        for i in 0..4 {
+                            ps[i] = match &t {
+                                Some(t) => {
+                                    let mut p = t.map(|a| a * (c1[i] - c0[i]));
+                                    p[0] += c0[i];
+                                    p
+                                }
+                                None => poly(&[0.0]),
+                            };
+                        }
+                    }
+                }
+                out[n] = (lo, hi, ps);
+                n += 1;
+            }
+            n
+        }
+    }
+
+    /// Mean, variance and `dE/dm` of channel `c` of the ramp at `X ~ N(m, s²)`, or with
+    /// `periodic`, of the ramp of `frac(X)` (radial `x` is an angle).
+    fn channel_moments(pieces: &[(f64, f64, [Poly; 4])], c: usize, m: f64, s: f64, periodic: bool) -> (f64, f64, f64) {
+        // E[p 1_piece], E[p² 1_piece], E[p' 1_piece].
+        let terms = |lo: f64, hi: f64, p: &Poly| {
+            (
+                piece_expectation(p, lo, hi, m, s),
+                piece_expectation(&poly_mul(p, p), lo, hi, m, s),
+                piece_expectation(&poly_deriv(p), lo, hi, m, s),
+            )
+        };
+        // A jump from `left` to `right` at `b` moves the mean by (jump) × density.
+        let jump = |b: f64, left: f64, right: f64| {
+            let z = (b - m) / s;
+            if z.abs() < 40.0 {
+                (right - left) * gaussian::pdf(z) / s
+            } else {
+                0.0
+            }
+        };
+        let (mut e, mut e2, mut de) = (0.0, 0.0, 0.0);
+        if !periodic {
+            for (j, (lo, hi, ps)) in pieces.iter().enumerate() {
+                let (a, b, d) = terms(*lo, *hi, &ps[c]);
+                e += a;
+                e2 += b;
+                de += d;
+                if j > 0 {
+                    de += jump(*lo, poly_eval(&pieces[j - 1].2[c], *lo), poly_eval(&ps[c], *lo));
+                }
+            }
+            return (e, (e2 - e * e).max(0.0), de);
+        }
+        // The ramp over one turn [0, 1), repeated: shifts k cover ±6σ around m.
+        let (k0, k1) = ((m - 6.0 * s).floor() as i64, (m + 6.0 * s).floor() as i64);
+        if k1 - k0 > 12 {
+            // The footprint spans many turns: x is uniform over the turn.
+            for (lo, hi, ps) in pieces {
+                let (a, b) = (lo.max(0.0), hi.min(1.0));
+                if a < b {
+                    e += integral(&ps[c], a, b);
+                    e2 += integral(&poly_mul(&ps[c], &ps[c]), a, b);
+                }
+            }
+            return (e, (e2 - e * e).max(0.0), 0.0);
+        }
+        // The value just below x = 1 (where the turn wraps to 0).
+        let below_one =
+            pieces.iter().find(|(lo, hi, _)| *lo < 1.0 && 1.0 <= *hi).map_or(0.0, |(_, _, ps)| poly_eval(&ps[c], 1.0));
+        for k in k0..=k1 {
+            let kf = k as f64;
+            let mut left = below_one;
+            for (lo, hi, ps) in pieces {
+                let (a, b) = (lo.max(0.0), hi.min(1.0));
+                if a >= b {
+                    continue;
+                }
+                let shifted = poly_shift_scale(&ps[c], -kf, 1.0);
+                let (t0, t1, t2) = terms(a + kf, b + kf, &shifted);
+                e += t0;
+                e2 += t1;
+                de += t2;
+                // The jump at the piece's lower end (at the turn's start, from the previous
+                // turn's end).
+                de += jump(a + kf, left, poly_eval(&shifted, a + kf));
+                left = poly_eval(&shifted, b + kf);
+            }
+        }
+        (e, (e2 - e * e).max(0.0), de)
+    }
+
+    /// Gauss–Legendre nodes and weights on [−1, 1], 6 points.
+    const LEGENDRE6: [(f64, f64); 6] = [
+        (-0.932_469_514_203_152_1, 0.171_324_492_379_170_4),
+        (-0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
+        (-0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
+        (0.238_619_186_083_196_9, 0.467_913_934_572_691_0),
+        (0.661_209_386_466_264_5, 0.360_761_573_048_138_6),
+        (0.932_469_514_203_152_1, 0.171_324_492_379_170_4),
+    ];
+
+    /// `E[p(X) 1{lo ≤ X < hi}]` for `X ~ N(m, s²)`. A piece much narrower than `s` is
+    /// integrated by Gauss–Legendre in `x` (the density is nearly polynomial across it), where
+    /// the partial-moment closed form would cancel catastrophically (its coefficients grow like
+    /// `(s / width)^degree`).
+    fn piece_expectation(p: &Poly, lo: f64, hi: f64, m: f64, s: f64) -> f64 {
+        if !(lo.is_finite() && hi.is_finite() && hi - lo < 0.25 * s) {
+            return poly_expectation(p, lo, hi, m, s);
+        }
+        let (c, h) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+        LEGENDRE6
+            .iter()
+            .map(|(z, w)| {
+                let x = c + h * z;
+                w * poly_eval(p, x) * gaussian::pdf((x - m) / s)
+            })
+            .sum::<f64>()
+            * h
+            / s
+    }
+
+    /// `∫_a^b p(x) dx`.
+    fn integral(p: &Poly, a: f64, b: f64) -> f64 {
+        let anti = |x: f64| p.iter().enumerate().rev().fold(0.0, |acc, (k, c)| acc * x + c / (k + 1) as f64) * x;
+        anti(b) - anti(a)
+    }
+
+    /// The filtered ramp coordinate for kinds 1–3 (mean and spread by cubature over the
+    /// texcoord's spread; the radial angle unwrapped around the centre's).
+    fn coordinate_moments(kind: i32, u: Moments, v: Moments) -> Moments {
+        if kind != 1 {
+            return moments::nary(&[u, v], |p| coordinate(kind, p[0], p[1]));
+        }
+        let centre = coordinate(1, u.mean as f64, v.mean as f64);
+        moments::nary(&[u, v], |p| {
+            let x = coordinate(1, p[0], p[1]);
+            centre + (x - centre - (x - centre).round())
+        })
+    }
+
+    pub(crate) fn eval(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+        let uniform = |f: &Filtered| f.ch[0].mean.round() as i32;
+        let mut spec = Spec {
+            kind: uniform(&ins[1]),
+            interp: uniform(&ins[2]),
+            count: uniform(&ins[3]),
+            at: [0.0; 10],
+            color: [[0.0; 4]; 10],
+        };
+        for k in 0..10 {
+            spec.at[k] = ins[4 + 2 * k].ch[0].mean as f64;
+            spec.color[k] = std::array::from_fn(|i| ins[5 + 2 * k].ch[i].mean as f64);
+        }
+        let (u, v) = (ins[0].ch[0], ins[0].ch[1]);
+        let mut out = Filtered::zero(ValueType::Color4);
+        let x = if spec.kind < 1 { u } else { coordinate_moments(spec.kind, u, v) };
+        let s = x.sigma() as f64;
+        if s == 0.0 {
+            let c = spec.at_x(x.mean as f64);
+            for i in 0..4 {
+                out.ch[i] = Moments::constant(c[i] as f32);
+            }
+            ctx.work.lattice += 1;
+        } else {
+            let mut pieces = [(0.0, 0.0, [poly(&[0.0]); 4]); 12];
+            let n = spec.pieces(&mut pieces);
+            let periodic = spec.kind == 1;
+            for i in 0..4 {
+                out.ch[i] = chain(x, channel_moments(&pieces[..n], i, x.mean as f64, s, periodic));
+            }
+            ctx.work.lattice += n as u64;
+        }
+        // Colours that vary over the footprint: their own slope and spread, weighted by their
+        // filtered weight in the ramp (`E[f] = Σ E[w_j] E[c_j]` for independent colours).
+        for j in 0..10 {
+            let col = &ins[5 + 2 * j];
+            if col.is_uniform() {
+                continue;
+            }
+            let mut one = spec;
+            one.color = [[0.0; 4]; 10];
+            one.color[j] = [1.0; 4];
+            let w = if s == 0.0 {
+                one.at_x(x.mean as f64)[0]
+            } else {
+                let mut pieces = [(0.0, 0.0, [poly(&[0.0]); 4]); 12];
+                let n = one.pieces(&mut pieces);
+                channel_moments(&pieces[..n], 0, x.mean as f64, s, spec.kind == 1).0
+            } as f32;
+            for i in 0..4 {
+                out.ch[i].grad += col.ch[i].grad * w;
+                out.ch[i].var += col.ch[i].var * w * w;
+            }
+        }
+        if ctx.point {
+            for c in out.ch.iter_mut() {
+                c.grad = Vec2::ZERO;
+            }
+        }
+        out
+    }
 }
 
 /// Moments of `clamp(x, 0, 1)`.
@@ -193,6 +577,7 @@ pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
             let bottom = mix_all(ty, &ins[2], &ins[3], s, ctx);
             mix_all(ty, &bottom, &top, t, ctx)
         }
+        PatternOp::Ramp => ramp::eval(ins, ctx),
         PatternOp::SplitLr => {
             let t = step(ins[2].ch[0].mean, ins[3].ch[0]);
             mix_all(ty, &ins[0], &ins[1], t, ctx)

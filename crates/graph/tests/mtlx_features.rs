@@ -1,0 +1,508 @@
+//! MaterialX document features: custom nodedefs implemented by node graphs, interfaces through
+//! any depth, version upgrades, includes, file prefixes, colour spaces, uniform and enum inputs;
+//! and the errors bad documents give (each naming its file and line).
+
+mod common;
+
+use glam::Vec2;
+use graph::{Document, EvalScratch, Footprint, LoadError, LoadErrorKind, LoadOptions};
+use std::path::{Path, PathBuf};
+
+/// A fresh folder for one test's files.
+fn dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("graph-features-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+/// A document of `version` around `body`.
+fn doc(version: &str, body: &str) -> String {
+    format!("<?xml version=\"1.0\"?>\n<materialx version=\"{version}\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n{body}\n</materialx>\n")
+}
+
+/// Output `name` of `doc` evaluated unfiltered at `uv`.
+fn eval(doc: &Document, name: &str, uv: Vec2) -> Vec<f32> {
+    let g = doc.graph();
+    let out = g.output_id(name).unwrap_or_else(|| {
+        let names: Vec<&str> = g.outputs().iter().map(|o| o.name.as_str()).collect();
+        panic!("no output {name}; have {names:?}; skipped {:?}", doc.skipped())
+    });
+    let mut scratch = EvalScratch::new(g);
+    let v = g.eval_output(out, &Footprint::point(uv), &mut scratch);
+    (0..g.output(out).ty.channels()).map(|k| v.ch[k].mean).collect()
+}
+
+fn close(a: &[f32], b: &[f32], tol: f32) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol)
+}
+
+/// The 1-based line of the first line of `path` containing `needle`.
+fn line_of(path: &Path, needle: &str) -> u32 {
+    let text = std::fs::read_to_string(path).unwrap();
+    text.lines().position(|l| l.contains(needle)).expect(needle) as u32 + 1
+}
+
+fn expect_error(path: &Path, line: u32) -> LoadError {
+    let e = Document::load(path).expect_err("the document should not load");
+    assert_eq!(e.location.file, path, "{e}");
+    assert_eq!(e.location.line, line, "{e}");
+    assert!(e.to_string().starts_with(&format!("{}:{line}:", path.display())), "{e}");
+    println!("{e}");
+    e
+}
+
+const SCALE_DEFS: &str = r#"
+  <nodedef name="ND_scaleoffset_float" node="scaleoffset" nodegroup="math">
+    <input name="in" type="float" value="0.0" />
+    <input name="scale" type="float" value="2.0" />
+    <input name="offset" type="float" value="0.25" />
+    <output name="out" type="float" />
+  </nodedef>
+  <nodegraph name="NG_scaleoffset_float" nodedef="ND_scaleoffset_float">
+    <multiply name="m" type="float">
+      <input name="in1" type="float" interfacename="in" />
+      <input name="in2" type="float" interfacename="scale" />
+    </multiply>
+    <add name="a" type="float">
+      <input name="in1" type="float" nodename="m" />
+      <input name="in2" type="float" interfacename="offset" />
+    </add>
+    <output name="out" type="float" nodename="a" />
+  </nodegraph>
+  <nodedef name="ND_uvsplit" node="uvsplit">
+    <input name="coord" type="vector2" defaultgeomprop="UV0" />
+    <input name="gain" type="float" value="1.0" />
+    <output name="u" type="float" />
+    <output name="v" type="float" />
+  </nodedef>
+  <nodegraph name="NG_uvsplit" nodedef="ND_uvsplit">
+    <separate2 name="sep" type="multioutput">
+      <input name="in" type="vector2" interfacename="coord" />
+    </separate2>
+    <scaleoffset name="su" type="float">
+      <input name="in" type="float" nodename="sep" output="outx" />
+      <input name="scale" type="float" interfacename="gain" />
+      <input name="offset" type="float" value="0.0" />
+    </scaleoffset>
+    <scaleoffset name="sv" type="float">
+      <input name="in" type="float" nodename="sep" output="outy" />
+      <input name="scale" type="float" interfacename="gain" />
+      <input name="offset" type="float" value="0.0" />
+    </scaleoffset>
+    <output name="u" type="float" nodename="su" />
+    <output name="v" type="float" nodename="sv" />
+  </nodegraph>
+"#;
+
+#[test]
+fn custom_nodedefs_expand_nested_and_multi_output() {
+    let d = dir("custom");
+    let body = format!(
+        r#"{SCALE_DEFS}
+  <input name="doc_gain" type="float" value="3.0" />
+  <nodegraph name="g">
+    <input name="gain" type="float" interfacename="doc_gain" />
+    <scaleoffset name="defaults" type="float">
+      <input name="in" type="float" value="1.0" />
+    </scaleoffset>
+    <scaleoffset name="set" type="float">
+      <input name="in" type="float" value="1.0" />
+      <input name="scale" type="float" value="-1.0" />
+      <input name="offset" type="float" nodename="defaults" />
+    </scaleoffset>
+    <uvsplit name="split" type="multioutput">
+      <input name="gain" type="float" interfacename="gain" />
+    </uvsplit>
+    <output name="defaults" type="float" nodename="defaults" />
+    <output name="set" type="float" nodename="set" />
+    <output name="u" type="float" nodename="split" output="u" />
+    <output name="v" type="float" nodename="split" output="v" />
+  </nodegraph>"#
+    );
+    let p = write(&d, "custom.mtlx", &doc("1.39", &body));
+    let doc = Document::load(&p).unwrap();
+    let uv = Vec2::new(0.3, 0.7);
+    // Defaults from the nodedef: 1 · 2 + 0.25.
+    assert!(close(&eval(&doc, "g/defaults", uv), &[2.25], 1e-6));
+    // Set inputs, one connected to another instance: 1 · −1 + 2.25.
+    assert!(close(&eval(&doc, "g/set", uv), &[1.25], 1e-6));
+    // Multi-output, nested definition, defaultgeomprop UV0, gain through three interfaces
+    // (instance → graph input → top-level input).
+    assert!(close(&eval(&doc, "g/u", uv), &[0.9], 1e-6));
+    assert!(close(&eval(&doc, "g/v", uv), &[2.1], 1e-5));
+    // The implementation graphs are content of their own, with the nodedef's defaults.
+    assert!(close(&eval(&doc, "NG_scaleoffset_float/out", uv), &[0.25], 1e-6));
+    assert!(close(&eval(&doc, "NG_uvsplit/v", uv), &[0.7], 1e-6));
+    // Instance nodes are named after their instance.
+    assert!(doc.graph().node_id("g/split/su/m").is_some());
+}
+
+#[test]
+fn versions_1_36_to_1_38_are_upgraded() {
+    let d = dir("versions");
+    let v136 = doc(
+        "1.36",
+        r#"  <nodegraph name="g">
+    <combine name="c" type="vector3">
+      <parameter name="in1" type="float" value="0.1" />
+      <parameter name="in2" type="float" value="0.2" />
+      <parameter name="in3" type="float" value="0.3" />
+    </combine>
+    <atan2 name="t" type="float">
+      <input name="in1" type="float" value="1.0" />
+      <input name="in2" type="float" value="2.0" />
+    </atan2>
+    <constant name="k" type="color2">
+      <input name="value" type="color2" value="0.25, 0.75" />
+    </constant>
+    <output name="c" type="vector3" nodename="c" />
+    <output name="t" type="float" nodename="t" />
+    <output name="k" type="vector2" nodename="k" />
+  </nodegraph>"#,
+    );
+    let p = write(&d, "v136.mtlx", &v136);
+    let doc136 = Document::load(&p).unwrap();
+    let uv = Vec2::new(0.5, 0.5);
+    assert!(close(&eval(&doc136, "g/c", uv), &[0.1, 0.2, 0.3], 1e-6));
+    // 1.36/1.37's atan2(in1, in2) became atan2(iny = in2, inx = in1).
+    assert!(close(&eval(&doc136, "g/t", uv), &[2.0f32.atan2(1.0)], 1e-6));
+    assert!(close(&eval(&doc136, "g/k", uv), &[0.25, 0.75], 1e-6));
+
+    let v138 = doc(
+        "1.38",
+        r#"  <nodegraph name="g">
+    <constant name="c" type="color4">
+      <input name="value" type="color4" value="0.1, 0.2, 0.3, 0.4" />
+    </constant>
+    <texcoord name="tc" type="vector2" />
+    <swizzle name="s" type="color3">
+      <input name="in" type="color4" nodename="c" />
+      <input name="channels" type="string" value="ab1" />
+    </swizzle>
+    <add name="a" type="float">
+      <input name="in1" type="float" nodename="tc" channels="y" />
+      <input name="in2" type="float" value="1.0" />
+    </add>
+    <atan2 name="t" type="float">
+      <input name="in1" type="float" value="1.0" />
+      <input name="in2" type="float" value="2.0" />
+    </atan2>
+    <output name="s" type="color3" nodename="s" />
+    <output name="a" type="float" nodename="a" />
+    <output name="t" type="float" nodename="t" />
+    <output name="sw" type="vector3" nodename="tc" channels="yx0" />
+  </nodegraph>"#,
+    );
+    let p = write(&d, "v138.mtlx", &v138);
+    let doc138 = Document::load(&p).unwrap();
+    let uv = Vec2::new(0.25, 0.625);
+    assert!(close(&eval(&doc138, "g/s", uv), &[0.4, 0.3, 1.0], 1e-6));
+    assert!(close(&eval(&doc138, "g/a", uv), &[1.625], 1e-6));
+    // 1.38's atan2(in1, in2) is atan2(iny = in1, inx = in2).
+    assert!(close(&eval(&doc138, "g/t", uv), &[1.0f32.atan2(2.0)], 1e-6));
+    assert!(close(&eval(&doc138, "g/sw", uv), &[0.625, 0.25, 0.0], 1e-6));
+}
+
+#[test]
+fn includes_are_read_recursively_once() {
+    let d = dir("include");
+    write(&d, "defs.mtlx", &doc("1.39", &format!("  <xi:include href=\"more.mtlx\" />\n{SCALE_DEFS}")));
+    write(
+        &d,
+        "more.mtlx",
+        &doc(
+            "1.38",
+            r#"  <nodegraph name="lib_graph">
+    <constant name="k" type="float"><input name="value" type="float" value="0.5" /></constant>
+    <output name="out" type="float" nodename="k" />
+  </nodegraph>"#,
+        ),
+    );
+    let main = write(
+        &d,
+        "main.mtlx",
+        &doc(
+            "1.39",
+            r#"  <xi:include href="defs.mtlx" />
+  <xi:include href="more.mtlx" />
+  <nodegraph name="g">
+    <scaleoffset name="s" type="float">
+      <input name="in" type="float" nodegraph="lib_graph" output="out" />
+    </scaleoffset>
+    <output name="out" type="float" nodename="s" />
+  </nodegraph>"#,
+        ),
+    );
+    let doc = Document::load(&main).unwrap();
+    assert_eq!(doc.files().len(), 3, "{:?}", doc.files());
+    assert!(close(&eval(&doc, "g/out", Vec2::ZERO), &[1.25], 1e-6));
+}
+
+#[test]
+fn file_prefixes_and_colour_spaces() {
+    let images = common::shared().join("mtlx-suite/images");
+    let d = dir("colour");
+    let body = r#"  <nodegraph name="g" fileprefix="resources/Images/">
+    <image name="raw" type="color3"><input name="file" type="filename" value="grid.png" /></image>
+    <image name="srgb" type="color3"><input name="file" type="filename" value="grid.png" colorspace="srgb_texture" /></image>
+    <image name="g22" type="color3"><input name="file" type="filename" value="grid.png" colorspace="g22_rec709" /></image>
+    <image name="ap1" type="color3"><input name="file" type="filename" value="grid.png" colorspace="acescg" /></image>
+    <image name="grey" type="float"><input name="file" type="filename" value="grid.png" colorspace="srgb_texture" /></image>
+    <constant name="k" type="color3"><input name="value" type="color3" value="0.5, 0.25, 1.0" colorspace="srgb_texture" /></constant>
+    <output name="raw" type="color3" nodename="raw" />
+    <output name="srgb" type="color3" nodename="srgb" />
+    <output name="g22" type="color3" nodename="g22" />
+    <output name="ap1" type="color3" nodename="ap1" />
+    <output name="grey" type="float" nodename="grey" />
+    <output name="k" type="color3" nodename="k" />
+  </nodegraph>"#;
+    let opts = LoadOptions { search_paths: vec![images.clone()], lenient: false };
+    let p = write(&d, "colour.mtlx", &doc("1.39", body));
+    let lin = Document::load_with(&p, &opts).unwrap();
+    let srgb = |x: f32| if x <= 0.04045 { x / 12.92 } else { ((x + 0.055) / 1.055).powf(2.4) };
+    // AP1 → Rec.709 (MaterialX's colour management), rows.
+    let m = [[1.705051f32, -0.621792, -0.083259], [-0.130256, 1.140805, -0.010548], [-0.024003, -0.128969, 1.152972]];
+    // Texel centres of the 640² image: the bilinear lookup returns the texel itself.
+    for (i, j) in [(3, 5), (100, 321), (320, 320), (639, 0)] {
+        let uv = Vec2::new((i as f32 + 0.5) / 640.0, (j as f32 + 0.5) / 640.0);
+        let raw = eval(&lin, "g/raw", uv);
+        let want: Vec<f32> = raw.iter().map(|x| srgb(*x)).collect();
+        assert!(close(&eval(&lin, "g/srgb", uv), &want, 1e-4));
+        let want: Vec<f32> = raw.iter().map(|x| x.max(0.0).powf(2.2)).collect();
+        assert!(close(&eval(&lin, "g/g22", uv), &want, 1e-4));
+        let want: Vec<f32> = m.iter().map(|r| r[0] * raw[0] + r[1] * raw[1] + r[2] * raw[2]).collect();
+        assert!(close(&eval(&lin, "g/ap1", uv), &want, 1e-4));
+        // Only colour images are colour managed.
+        assert!(close(&eval(&lin, "g/grey", uv), &raw[..1], 1e-6));
+    }
+    let k = eval(&lin, "g/k", Vec2::ZERO);
+    assert!(close(&k, &[srgb(0.5), srgb(0.25), 1.0], 1e-6), "{k:?}");
+
+    // An ACEScg working space: Rec.709 values are converted into it, AP1 ones are not.
+    let body_ap1 = r#"  <nodegraph name="g">
+    <constant name="a" type="color3"><input name="value" type="color3" value="0.2, 0.4, 0.6" colorspace="lin_rec709" /></constant>
+    <constant name="b" type="color3"><input name="value" type="color3" value="0.2, 0.4, 0.6" /></constant>
+    <output name="a" type="color3" nodename="a" />
+    <output name="b" type="color3" nodename="b" />
+  </nodegraph>"#;
+    let p = write(
+        &d,
+        "acescg.mtlx",
+        &doc("1.39", body_ap1).replace("version=\"1.39\"", "version=\"1.39\" colorspace=\"acescg\""),
+    );
+    let ap1 = Document::load(&p).unwrap();
+    let a = eval(&ap1, "g/a", Vec2::ZERO);
+    let back: Vec<f32> = m.iter().map(|r| r[0] * a[0] + r[1] * a[1] + r[2] * a[2]).collect();
+    assert!(close(&back, &[0.2, 0.4, 0.6], 1e-4), "{a:?} → {back:?}");
+    assert!(close(&eval(&ap1, "g/b", Vec2::ZERO), &[0.2, 0.4, 0.6], 1e-7));
+
+    // A wrong prefix is a missing file, named with the line of the element giving the value.
+    let p = write(&d, "prefix.mtlx", &doc("1.39", &body.replace("resources/Images/", "nowhere/")));
+    let e = Document::load_with(&p, &opts).expect_err("missing file");
+    assert!(matches!(&e.kind, LoadErrorKind::MissingFile(f) if f.ends_with("nowhere/grid.png")), "{e}");
+    assert_eq!(e.location.line, line_of(&p, "name=\"raw\""), "{e}");
+    // An unknown colour space is an error naming it.
+    let p = write(&d, "unknown_cs.mtlx", &doc("1.39", &body.replace("g22_rec709", "g23_rec709")));
+    let e = Document::load_with(&p, &opts).expect_err("unknown colour space");
+    assert_eq!(e.location.line, line_of(&p, "g23_rec709"), "{e}");
+    assert!(e.to_string().contains("g23_rec709") && e.to_string().contains("srgb_texture"), "{e}");
+}
+
+#[test]
+fn uniform_and_enum_inputs() {
+    let d = dir("uniform");
+    let defs = r#"  <nodedef name="ND_pick" node="pick">
+    <input name="which" type="integer" value="0" uniform="true" enum="low,mid,high" enumvalues="1,2,3" />
+    <output name="out" type="float" />
+  </nodedef>
+  <nodegraph name="NG_pick" nodedef="ND_pick">
+    <convert name="c" type="float"><input name="in" type="integer" interfacename="which" /></convert>
+    <output name="out" type="float" nodename="c" />
+  </nodegraph>"#;
+    let ok = format!(
+        "{defs}\n  <nodegraph name=\"g\">\n    <pick name=\"p\" type=\"float\"><input name=\"which\" type=\"integer\" value=\"high\" /></pick>\n    <output name=\"out\" type=\"float\" nodename=\"p\" />\n  </nodegraph>"
+    );
+    let p = write(&d, "enum.mtlx", &doc("1.39", &ok));
+    let doc_ok = Document::load(&p).unwrap();
+    assert!(close(&eval(&doc_ok, "g/out", Vec2::ZERO), &[3.0], 0.0));
+    let bad = format!(
+        "{defs}\n  <nodegraph name=\"g\">\n    <constant name=\"k\" type=\"integer\"><input name=\"value\" type=\"integer\" value=\"2\" /></constant>\n    <pick name=\"p\" type=\"float\">\n      <input name=\"which\" type=\"integer\" nodename=\"k\" uniform=\"true\" />\n    </pick>\n    <output name=\"out\" type=\"float\" nodename=\"p\" />\n  </nodegraph>"
+    );
+    let p = write(&d, "uniform.mtlx", &doc("1.39", &bad));
+    let e = expect_error(&p, line_of(&p, "uniform=\"true\" />"));
+    assert!(e.to_string().contains("uniform"), "{e}");
+}
+
+#[test]
+fn unsupported_nodes_are_reported_together() {
+    let d = dir("unsupported");
+    let p = write(
+        &d,
+        "many.mtlx",
+        &doc(
+            "1.39",
+            r#"  <nodegraph name="a">
+    <frobnicate name="f" type="float" />
+    <output name="out" type="float" nodename="f" />
+  </nodegraph>
+  <nodegraph name="b">
+    <constant name="k" type="float" />
+    <twiddle name="t" type="color3" />
+    <output name="out" type="float" nodename="k" />
+  </nodegraph>
+  <wibble name="w" type="float" />"#,
+        ),
+    );
+    let e = expect_error(&p, 4);
+    let LoadErrorKind::Unsupported { items, .. } = &e.kind else { panic!("{e}") };
+    let found: Vec<(&str, u32)> = items.iter().map(|u| (u.category.as_str(), u.location.line)).collect();
+    assert_eq!(found, vec![("frobnicate", 4), ("twiddle", 9), ("wibble", 12)], "{e}");
+    // Leniently, only the outputs that need them are left out.
+    let lenient = Document::load_with(&p, &LoadOptions { lenient: true, ..Default::default() }).unwrap();
+    assert!(lenient.graph().output_id("b/out").is_some());
+    let (_, why) = lenient.skipped().iter().find(|(n, _)| n == "a/out").unwrap();
+    assert!(why.contains("frobnicate") && why.contains("many.mtlx:4:"), "{why}");
+    assert_eq!(lenient.unsupported().len(), 3);
+}
+
+#[test]
+fn unresolvable_nodedefs_are_errors() {
+    let d = dir("nodedef");
+    let p = write(
+        &d,
+        "missing_def.mtlx",
+        &doc("1.39", "  <nodegraph name=\"g\">\n    <gizmo name=\"x\" type=\"float\" nodedef=\"ND_gizmo_float\" />\n  </nodegraph>"),
+    );
+    let e = expect_error(&p, 4);
+    assert!(e.to_string().contains("ND_gizmo_float"), "{e}");
+    // A nodedef exists for the node, but not for its type.
+    let p = write(
+        &d,
+        "no_match.mtlx",
+        &doc("1.39", &format!("{SCALE_DEFS}\n  <nodegraph name=\"g\">\n    <scaleoffset name=\"x\" type=\"color3\" />\n  </nodegraph>")),
+    );
+    let e = expect_error(&p, line_of(&p, "type=\"color3\" />"));
+    assert!(e.to_string().contains("ND_scaleoffset_float"), "{e}");
+    // A definition that instantiates itself.
+    let p = write(
+        &d,
+        "recursive.mtlx",
+        &doc(
+            "1.39",
+            r#"  <nodedef name="ND_loop" node="loop"><output name="out" type="float" /></nodedef>
+  <nodegraph name="NG_loop" nodedef="ND_loop">
+    <loop name="inner" type="float" />
+    <output name="out" type="float" nodename="inner" />
+  </nodegraph>"#,
+        ),
+    );
+    let e = expect_error(&p, 5);
+    assert!(e.to_string().contains("recursive"), "{e}");
+}
+
+#[test]
+fn interface_cycles_are_errors() {
+    let d = dir("cycle");
+    let p = write(
+        &d,
+        "iface.mtlx",
+        &doc(
+            "1.39",
+            r#"  <input name="a" type="float" interfacename="b" />
+  <input name="b" type="float" interfacename="a" />
+  <nodegraph name="g">
+    <input name="x" type="float" interfacename="a" />
+    <add name="s" type="float"><input name="in1" type="float" interfacename="x" /></add>
+    <output name="out" type="float" nodename="s" />
+  </nodegraph>"#,
+        ),
+    );
+    let e = expect_error(&p, 4);
+    assert!(e.to_string().contains("interface cycle"), "{e}");
+    // An instance whose input reads its own output.
+    let p = write(
+        &d,
+        "instance.mtlx",
+        &doc(
+            "1.39",
+            &format!(
+                "{SCALE_DEFS}\n  <nodegraph name=\"g\">\n    <scaleoffset name=\"s\" type=\"float\">\n      <input name=\"in\" type=\"float\" nodename=\"s\" />\n    </scaleoffset>\n    <output name=\"out\" type=\"float\" nodename=\"s\" />\n  </nodegraph>"
+            ),
+        ),
+    );
+    let e = Document::load(&p).expect_err("cycle");
+    assert!(matches!(e.kind, LoadErrorKind::Cycle(_)), "{e}");
+    assert_eq!(e.location.file, p);
+}
+
+#[test]
+fn missing_includes_and_versions_are_errors() {
+    let d = dir("include-errors");
+    let p =
+        write(&d, "missing.mtlx", &doc("1.39", "  <nodegraph name=\"g\" />\n  <xi:include href=\"nowhere.mtlx\" />"));
+    let e = expect_error(&p, 4);
+    assert!(matches!(&e.kind, LoadErrorKind::MissingFile(f) if f.ends_with("nowhere.mtlx")), "{e}");
+    // An error inside an included file names that file and line.
+    write(
+        &d,
+        "broken.mtlx",
+        &doc("1.39", "  <nodegraph name=\"h\">\n    <add name=\"a\" type=\"float\">\n  </nodegraph>"),
+    );
+    let p = write(&d, "includes_broken.mtlx", &doc("1.39", "  <xi:include href=\"broken.mtlx\" />"));
+    let e = Document::load(&p).expect_err("broken include");
+    assert_eq!(e.location.file, d.join("broken.mtlx"), "{e}");
+    assert!(e.location.line >= 5, "{e}");
+    // Include cycles.
+    write(&d, "c1.mtlx", &doc("1.39", "  <xi:include href=\"c2.mtlx\" />"));
+    write(&d, "c2.mtlx", &doc("1.39", "  <xi:include href=\"c1.mtlx\" />"));
+    let e = Document::load(d.join("c1.mtlx")).expect_err("include cycle");
+    assert!(e.to_string().contains("include cycle"), "{e}");
+    // Versions from the future, and from before 1.36.
+    let p = write(&d, "future.mtlx", &doc("1.40", "  <nodegraph name=\"g\" />"));
+    let e = expect_error(&p, 2);
+    assert!(e.to_string().contains("1.40"), "{e}");
+    let p = write(&d, "past.mtlx", &doc("1.35", "  <nodegraph name=\"g\" />"));
+    let e = expect_error(&p, 2);
+    assert!(e.to_string().contains("1.35"), "{e}");
+}
+
+#[test]
+fn default_geometric_properties() {
+    let d = dir("geomprop");
+    let p = write(
+        &d,
+        "geomprop.mtlx",
+        &doc(
+            "1.39",
+            r#"  <nodedef name="ND_where" node="where">
+    <input name="p" type="vector3" defaultgeomprop="Pobject" />
+    <input name="t" type="vector2" defaultgeomprop="UV0" />
+    <output name="p" type="vector3" />
+    <output name="t" type="vector2" />
+  </nodedef>
+  <nodegraph name="NG_where" nodedef="ND_where">
+    <dot name="dp" type="vector3"><input name="in" type="vector3" interfacename="p" /></dot>
+    <dot name="dt" type="vector2"><input name="in" type="vector2" interfacename="t" /></dot>
+    <output name="p" type="vector3" nodename="dp" />
+    <output name="t" type="vector2" nodename="dt" />
+  </nodegraph>
+  <nodegraph name="g">
+    <where name="w" type="multioutput" />
+    <output name="p" type="vector3" nodename="w" output="p" />
+    <output name="t" type="vector2" nodename="w" output="t" />
+  </nodegraph>"#,
+        ),
+    );
+    let doc = Document::load(&p).unwrap();
+    let uv = Vec2::new(0.25, 0.75);
+    // The baker's quad: position (2u − 1, 2v − 1, 0).
+    assert!(close(&eval(&doc, "g/p", uv), &[-0.5, 0.5, 0.0], 1e-6));
+    assert!(close(&eval(&doc, "g/t", uv), &[0.25, 0.75], 1e-7));
+}

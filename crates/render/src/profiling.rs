@@ -1,0 +1,520 @@
+//! The profiling render: a short render that taps every graph request and writes a
+//! [`plan::Profile`] for the selective-caching model.
+//!
+//! Each shading point's evaluation of a material's graph is one request of that material's
+//! stream. The tap records its level and the tiles a trilinear lookup of a cached node would
+//! read there (the cache crate's [`cache::trilinear_taps`], the same arithmetic the lookup uses,
+//! on the textures [`crate::caching`] would create), with touch counts; the evaluator records
+//! each node's own cost per level from timed evaluations. Nothing is cached while profiling, so
+//! every node of a request's plan is evaluated and timed.
+//!
+//! The profile traces a deterministic subset of the image's pixels (`pixel_fraction`) at the
+//! final render's footprints: fewer samples, the same distribution of requests per sample.
+
+use std::collections::HashMap;
+use std::time::Instant;
+
+use cache::{CacheConfig, Filter, TexelFormat, TexelRequest, TextureDesc, TileCache, TileRef};
+use graph::{EvalPlan, EvalScratch, Filtered, Footprint, Graph, NoOverride, NodeId, Source};
+use plan::profile::{
+    CacheGeometry, LevelCost, LevelCount, LevelTiles, MachineCosts, Profile, ProfileGraph, ProfileNode, ProfileRender,
+    SceneId, Stream, FINER_THAN_LEVEL0, PROFILE_SCHEMA,
+};
+use rayon::prelude::*;
+
+use crate::caching::{channels, worth_caching, LEVEL0_TEXELS_PER_UV, MAX_LEVEL};
+use crate::integrator::{NoObserver, RenderCounts, RenderSettings, TILE};
+use crate::scene::Scene;
+use crate::shading::ShadeScratch;
+
+/// Level bins: finer than level 0, then levels `0..=MAX_LEVEL`.
+const BINS: usize = MAX_LEVEL as usize + 2;
+/// While profiling, one evaluation in this many of each node is timed.
+const PROFILE_TIMING_PERIOD: u64 = 4;
+/// One request in this many is timed as a whole (evaluation and tap separately).
+const CALL_TIMING_PERIOD: u64 = 16;
+
+/// What to profile.
+#[derive(Clone, Debug)]
+pub struct ProfileOptions {
+    /// Render settings (spp is the profile's samples per traced pixel).
+    pub settings: RenderSettings,
+    /// Fraction of the pixels traced, in (0, 1].
+    pub pixel_fraction: f64,
+    /// Fraction of the traced pixels that take one more sample, timed but not recorded as tile
+    /// reads (the warm-sample estimate of time outside textures when `spp` is 1).
+    pub warm_fraction: f64,
+    /// The scene's name and content hash (recorded for checks).
+    pub scene: SceneId,
+}
+
+/// One stream's records on one thread.
+#[derive(Clone, Debug, Default)]
+struct StreamTap {
+    requests: [u64; BINS],
+    tiles: HashMap<TileRef, (u64, u64)>,
+}
+
+/// The per-thread recorder a [`ShadeScratch`] carries while profiling.
+#[derive(Debug)]
+pub struct Tap {
+    desc: TextureDesc,
+    tile_size: u32,
+    streams: Vec<StreamTap>,
+    calls: u64,
+    eval_ns: u64,
+    tap_ns: u64,
+    timed_calls: u64,
+    /// Time every call (not one in [`CALL_TIMING_PERIOD`]) and add it to `exact_eval_ns`.
+    exact: bool,
+    exact_eval_ns: u64,
+}
+
+impl Tap {
+    fn new(streams: usize) -> Tap {
+        Tap {
+            desc: texture_desc(),
+            tile_size: CacheConfig::default().tile_size,
+            streams: vec![StreamTap::default(); streams],
+            calls: 0,
+            eval_ns: 0,
+            tap_ns: 0,
+            timed_calls: 0,
+            exact: false,
+            exact_eval_ns: 0,
+        }
+    }
+
+    /// Records one request of `stream` and evaluates it.
+    pub(crate) fn evaluate(
+        &mut self,
+        stream: u32,
+        g: &Graph,
+        plan: &EvalPlan,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        out: &mut [Filtered],
+    ) {
+        let timed = self.calls % CALL_TIMING_PERIOD == 0;
+        self.calls += 1;
+        let t_all = self.exact.then(Instant::now);
+        let t0 = timed.then(Instant::now);
+        let taps = cache::trilinear_taps(&self.desc, self.tile_size, fp.uv, fp.cov);
+        let level = cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV);
+        let b = if level < 0.0 { 0 } else { (taps.lod as usize + 1).min(BINS - 1) };
+        let st = &mut self.streams[stream as usize];
+        st.requests[b] += 1;
+        if b > 0 && !self.exact {
+            st.tiles.entry(taps.lower).or_default().0 += 1;
+            if let Some(u) = taps.upper {
+                st.tiles.entry(u).or_default().1 += 1;
+            }
+        }
+        scratch.set_bin(b);
+        let t1 = timed.then(Instant::now);
+        g.eval(plan, fp, scratch, &NoOverride, out);
+        if let (Some(t0), Some(t1)) = (t0, t1) {
+            self.tap_ns += (t1 - t0).as_nanos() as u64;
+            self.eval_ns += t1.elapsed().as_nanos() as u64;
+            self.timed_calls += 1;
+        }
+        if let Some(t) = t_all {
+            self.exact_eval_ns += t.elapsed().as_nanos() as u64;
+        }
+    }
+
+    fn merge(&mut self, o: &Tap) {
+        for (a, b) in self.streams.iter_mut().zip(&o.streams) {
+            for (x, y) in a.requests.iter_mut().zip(&b.requests) {
+                *x += y;
+            }
+            for (k, v) in &b.tiles {
+                let e = a.tiles.entry(*k).or_default();
+                e.0 += v.0;
+                e.1 += v.1;
+            }
+        }
+        self.calls += o.calls;
+        self.eval_ns += o.eval_ns;
+        self.tap_ns += o.tap_ns;
+        self.timed_calls += o.timed_calls;
+    }
+}
+
+/// The texture every cached node gets (as [`crate::caching::NodeCache`] creates them).
+fn texture_desc() -> TextureDesc {
+    TextureDesc { channels: 1, format: TexelFormat::F16, texels_per_uv: LEVEL0_TEXELS_PER_UV, max_level: MAX_LEVEL }
+}
+
+/// Whether pixel `(x, y)` is traced at `fraction` (a hash of the pixel, so the subset is spread
+/// evenly and the same at any thread count).
+fn traced(x: u32, y: u32, fraction: f64) -> bool {
+    let mut h = (u64::from(y) << 32 | u64::from(x)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    h ^= h >> 29;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^= h >> 32;
+    (h >> 11) as f64 / (1u64 << 53) as f64 <= fraction
+}
+
+/// Per tile of the image: the tap, counters and the evaluator's binned timings and statistics.
+type TileProfile = (Tap, RenderCounts, Vec<graph::BinnedTimings>, Vec<graph::EvalStats>, Warm);
+
+/// Thread-nanoseconds of the samples after a pixel's first, and how many: a render's samples of
+/// one pixel share warm processor caches, so these, not first samples, tell the per-sample cost
+/// of a render with many samples per pixel.
+#[derive(Clone, Copy, Debug, Default)]
+struct Warm {
+    samples: u64,
+    path_ns: u64,
+    eval_ns: u64,
+}
+
+/// One pixel's samples (as `render_pixel_with` takes them) and `extra` more, timing those after
+/// the first.
+#[allow(clippy::too_many_arguments)]
+fn profile_pixel(
+    scene: &Scene,
+    settings: RenderSettings,
+    extra: u32,
+    x: u32,
+    y: u32,
+    counts: &mut RenderCounts,
+    shade: &mut ShadeScratch,
+    warm: &mut Warm,
+) {
+    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
+    for s in 0..settings.spp + extra {
+        let mut rng = crate::sampling::Rng::for_sample(settings.seed, pixel_index, u64::from(s));
+        let offset = scene.rfilter.sample(|| rng.next_f32());
+        let film = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
+        let cam = scene.camera.generate_ray(film);
+        let tap = shade.tap.as_mut().expect("profiling");
+        tap.exact = s > 0;
+        let before = tap.exact_eval_ns;
+        let t = Instant::now();
+        crate::integrator::radiance(scene, settings, &cam, &mut rng, counts, shade, &mut NoObserver);
+        counts.samples += 1;
+        if s > 0 {
+            warm.samples += 1;
+            warm.path_ns += t.elapsed().as_nanos() as u64;
+            warm.eval_ns += shade.tap.as_ref().expect("profiling").exact_eval_ns - before;
+        }
+    }
+}
+
+/// Runs the profiling render on the current rayon pool and returns the profile.
+pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Profile> {
+    if !(opts.pixel_fraction > 0.0 && opts.pixel_fraction <= 1.0) {
+        return Err(crate::error::Error::plain(format!(
+            "the profiled pixel fraction must be in (0, 1], got {}",
+            opts.pixel_fraction
+        )));
+    }
+    let streams: usize = scene.materials.iter().map(|m| m.graphs.len()).sum();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let tiles: Vec<(u32, u32)> =
+        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
+    let settings = opts.settings;
+    // Calibrate first: it also brings the cores out of idle, whose slow clocks would otherwise
+    // inflate the first tens of milliseconds of the profile.
+    let (lookup_ns, fill_ns_per_texel, timer_ns) = calibrate();
+    let start = Instant::now();
+    let results: Vec<TileProfile> = tiles
+        .par_iter()
+        .map(|&(tx, ty)| {
+            let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
+            for s in shade.eval_scratches_mut() {
+                s.enable_binned_timing(BINS, PROFILE_TIMING_PERIOD);
+            }
+            shade.tap = Some(Box::new(Tap::new(streams)));
+            let mut counts = RenderCounts::default();
+            let mut warm = Warm::default();
+            for y in ty * TILE..((ty + 1) * TILE).min(h) {
+                for x in tx * TILE..((tx + 1) * TILE).min(w) {
+                    if traced(x, y, opts.pixel_fraction) {
+                        // A second hash (of the transposed pixel) picks the warm-timed pixels.
+                        let extra = u32::from(settings.spp == 1 && traced(y, x, opts.warm_fraction));
+                        profile_pixel(scene, settings, extra, x, y, &mut counts, &mut shade, &mut warm);
+                    }
+                }
+            }
+            let binned = shade.eval_scratches_mut().iter().map(|s| s.binned_timings().clone()).collect();
+            let mut stats = Vec::new();
+            shade.merge_stats_into(&mut stats);
+            (*shade.tap.take().expect("the tap was set"), counts, binned, stats, warm)
+        })
+        .collect();
+    let wall_s = start.elapsed().as_secs_f64();
+    let threads = rayon::current_num_threads() as u32;
+
+    let mut tap = Tap::new(streams);
+    let mut counts = RenderCounts::default();
+    let mut binned: Vec<graph::BinnedTimings> = Vec::new();
+    let mut stats: Vec<graph::EvalStats> = vec![graph::EvalStats::default(); scene.graphs.len()];
+    let mut warm = Warm::default();
+    let mut first_samples = 0u64;
+    for (t, c, b, s, w) in &results {
+        tap.merge(t);
+        warm.samples += w.samples;
+        warm.path_ns += w.path_ns;
+        warm.eval_ns += w.eval_ns;
+        counts.samples += c.samples;
+        first_samples += c.samples - w.samples;
+        if binned.is_empty() {
+            binned = b.clone();
+        } else {
+            for (x, y) in binned.iter_mut().zip(b) {
+                x.ns.iter_mut().zip(&y.ns).for_each(|(p, q)| *p += q);
+                x.count.iter_mut().zip(&y.count).for_each(|(p, q)| *p += q);
+            }
+        }
+        for (x, y) in stats.iter_mut().zip(s) {
+            crate::caching::merge_eval_stats(x, y);
+        }
+    }
+    if counts.samples == 0 {
+        return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
+    }
+    // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
+    let outside_thread_s = if warm.samples > 0 {
+        (warm.path_ns - warm.eval_ns.min(warm.path_ns)) as f64 / warm.samples as f64 * counts.samples as f64 * 1e-9
+    } else {
+        0.0
+    };
+    let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
+    let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
+    let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
+    // The evaluator's bookkeeping per node evaluation: graph time not inside any node's own
+    // (timed) work, less the clocks' share.
+    let (mut evaluations, mut own_s) = (0u64, 0.0);
+    for st in &stats {
+        for (i, &e) in st.evaluations.iter().enumerate() {
+            evaluations += e;
+            if st.timed[i] > 0 {
+                let mean = st.timed_ns[i] as f64 / st.timed[i] as f64;
+                own_s += e as f64 * (mean - timer_ns).max(0.0) * 1e-9;
+            }
+        }
+    }
+    let node_overhead_ns = if evaluations > 0 {
+        ((texture_thread_s - own_s) / evaluations as f64 * 1e9 - timer_ns / PROFILE_TIMING_PERIOD as f64).max(0.0)
+    } else {
+        0.0
+    };
+
+    let graphs = scene
+        .graphs
+        .iter()
+        .enumerate()
+        .map(|(gi, sg)| profile_graph(sg.file_name().to_string(), sg.graph(), binned.get(gi)))
+        .collect();
+    let mut pstreams = Vec::with_capacity(streams);
+    for (mi, m) in scene.materials.iter().enumerate() {
+        for mg in &m.graphs {
+            let g = scene.graphs[mg.graph as usize].graph();
+            let outputs = mg
+                .plan
+                .outputs()
+                .iter()
+                .filter_map(|&o| match g.output(o).source {
+                    Source::Node { node, .. } => Some(node.0),
+                    _ => None,
+                })
+                .collect();
+            pstreams.push(stream_of(&tap.streams[mg.stream as usize], format!("material {mi}"), mg.graph, outputs));
+        }
+    }
+    let probe = TileCache::new(CacheConfig::default()).map_err(|e| crate::error::Error::plain(e.to_string()))?;
+    let tile_size = probe.config().tile_size;
+    let texel_bytes = (tile_size as usize + 1).pow(2) * TexelFormat::F16.bytes();
+    Ok(Profile {
+        schema: PROFILE_SCHEMA.into(),
+        scene: opts.scene.clone(),
+        render: ProfileRender {
+            width: w,
+            height: h,
+            spp: settings.spp,
+            scene_spp: scene.spp,
+            pixel_fraction: opts.pixel_fraction,
+            samples: counts.samples,
+            tile_samples: first_samples,
+            threads,
+            wall_s,
+            outside_thread_s,
+            texture_thread_s,
+            tap_thread_s,
+        },
+        cache: CacheGeometry {
+            tile_size,
+            level0_texels_per_uv: f64::from(LEVEL0_TEXELS_PER_UV),
+            max_level: MAX_LEVEL,
+            bytes_per_channel: TexelFormat::F16.bytes() as u32,
+            tile_overhead_bytes: (cache::tile_bytes_for(&texture_desc(), tile_size) - texel_bytes) as u64,
+        },
+        machine: MachineCosts { lookup_ns, fill_ns_per_texel, node_overhead_ns, timer_ns },
+        graphs,
+        streams: pstreams,
+    })
+}
+
+/// Level of bin `b`.
+fn bin_level(b: usize) -> i32 {
+    b as i32 + FINER_THAN_LEVEL0
+}
+
+fn stream_of(st: &StreamTap, material: String, graph: u32, outputs: Vec<u32>) -> Stream {
+    let requests = (0..BINS)
+        .filter(|&b| st.requests[b] > 0)
+        .map(|b| LevelCount { level: bin_level(b), requests: st.requests[b] })
+        .collect();
+    let mut by_level: Vec<Vec<[i64; 4]>> = vec![Vec::new(); MAX_LEVEL as usize + 1];
+    for (k, &(lo, up)) in &st.tiles {
+        by_level[usize::from(k.level)].push([i64::from(k.x), i64::from(k.y), lo as i64, up as i64]);
+    }
+    let tiles = by_level
+        .into_iter()
+        .enumerate()
+        .filter(|(_, t)| !t.is_empty())
+        .map(|(l, mut tiles)| {
+            tiles.sort_unstable();
+            LevelTiles { level: l as u8, tiles }
+        })
+        .collect();
+    Stream { material, graph, outputs, requests, tiles }
+}
+
+/// A graph's nodes for the profile, with costs from the binned timings.
+fn profile_graph(name: String, g: &Graph, binned: Option<&graph::BinnedTimings>) -> ProfileGraph {
+    let nodes = g
+        .node_ids()
+        .map(|id| {
+            let i = id.0 as usize;
+            let cost = match binned {
+                Some(b) if b.bins == BINS => (0..BINS)
+                    .filter(|&k| b.count[i * BINS + k] > 0)
+                    .map(|k| LevelCost {
+                        level: bin_level(k),
+                        ns: b.ns[i * BINS + k] as f64 / b.count[i * BINS + k] as f64,
+                        samples: b.count[i * BINS + k],
+                    })
+                    .collect(),
+                _ => Vec::new(),
+            };
+            let ch = channels(g.node_type(id));
+            ProfileNode {
+                name: g.node_name(id).to_string(),
+                category: g.node_category(id).to_string(),
+                channels: ch.unwrap_or(4),
+                cacheable: ch.is_some() && worth_caching(g, id),
+                inputs: node_inputs(g, id),
+                cost,
+            }
+        })
+        .collect();
+    ProfileGraph { name, hash: graph_hash(g), nodes }
+}
+
+/// The nodes `id` reads (each once).
+fn node_inputs(g: &Graph, id: NodeId) -> Vec<u32> {
+    let mut v: Vec<u32> = g
+        .node_inputs(id)
+        .into_iter()
+        .filter_map(|(_, s)| match s {
+            Source::Node { node, .. } => Some(node.0),
+            _ => None,
+        })
+        .collect();
+    v.sort_unstable();
+    v.dedup();
+    v
+}
+
+/// FNV-1a over bytes, as hex.
+pub fn fnv_hex(parts: &[&[u8]]) -> String {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for p in parts {
+        for &b in *p {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        h ^= 0xff;
+        h = h.wrapping_mul(0x0100_0000_01b3);
+    }
+    format!("{h:016x}")
+}
+
+/// A hash of a graph's structure: node names, categories, types and connections.
+pub fn graph_hash(g: &Graph) -> String {
+    let mut text = String::new();
+    for id in g.node_ids() {
+        text.push_str(&format!(
+            "{}|{}|{:?}|{:?};",
+            g.node_name(id),
+            g.node_category(id),
+            g.node_type(id),
+            node_inputs(g, id)
+        ));
+    }
+    fnv_hex(&[text.as_bytes()])
+}
+
+/// Measures on this machine: a trilinear lookup that hits, the tile machinery's cost per texel
+/// filled, and the cost of one timing (nanoseconds).
+pub fn calibrate() -> (f64, f64, f64) {
+    let config = CacheConfig { in_flight: cache::InFlight::Wait, ..CacheConfig::with_budget(256 << 20) };
+    let tile_size = config.tile_size;
+    let mut cache = TileCache::new(config).expect("a valid cache");
+    let desc = TextureDesc { channels: 3, ..texture_desc() };
+    let tex = cache.add_texture(desc).expect("a valid texture");
+    let fill = |r: TexelRequest| [r.uv.x, r.uv.y, 0.5];
+    // Fills: one lookup per tile of level 0 along a row, each filling one new tile.
+    let d = f64::from(LEVEL0_TEXELS_PER_UV);
+    let tiles = 2000;
+    let texel = Filter::TRILINEAR;
+    let t = Instant::now();
+    for k in 0..tiles {
+        let uv = glam::Vec2::new((((k * tile_size as usize) as f64 + 4.5) / d) as f32, (4.5 / d) as f32);
+        cache.lookup_level(tex, uv, 0.0, &fill);
+    }
+    let fill_s = t.elapsed().as_secs_f64();
+    let texels = tiles as f64 * f64::from(tile_size + 1).powi(2);
+    let fill_ns_per_texel = fill_s * 1e9 / texels;
+    // Hits: lookups at random footprints over the filled row (levels 0 to 3).
+    let mut s = 0x2545_F491_4F6C_DD1Du64;
+    let mut next = || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let n = 200_000;
+    let span = (tiles * tile_size as usize) as f32 / LEVEL0_TEXELS_PER_UV;
+    let queries: Vec<(glam::Vec2, glam::Mat2)> = (0..n)
+        .map(|_| {
+            let uv = glam::Vec2::new(next() * span * 0.9, next() * 8.0 / LEVEL0_TEXELS_PER_UV);
+            let sigma = (next() * 3.0).exp2() / LEVEL0_TEXELS_PER_UV;
+            (uv, glam::Mat2::from_diagonal(glam::Vec2::splat(sigma * sigma)))
+        })
+        .collect();
+    for &(uv, cov) in queries.iter().take(n / 4) {
+        cache.lookup(tex, uv, cov, texel, &fill); // warm every level
+    }
+    let t = Instant::now();
+    let mut acc = 0.0f32;
+    for &(uv, cov) in &queries {
+        acc += cache.lookup(tex, uv, cov, texel, &fill)[0];
+    }
+    let lookup_ns = t.elapsed().as_secs_f64() * 1e9 / n as f64;
+    std::hint::black_box(acc);
+    // One timing: two clock reads and the subtraction.
+    let reps = 100_000;
+    let t = Instant::now();
+    let mut sink = 0u128;
+    for _ in 0..reps {
+        let a = Instant::now();
+        sink += a.elapsed().as_nanos();
+    }
+    std::hint::black_box(sink);
+    let timer_ns = t.elapsed().as_secs_f64() * 1e9 / reps as f64;
+    (lookup_ns, fill_ns_per_texel, timer_ns)
+}

@@ -1,0 +1,588 @@
+//! Selective caching on the command line: `tessera profile`, `tessera plan`, `tessera analyze`,
+//! and the pipeline behind `tessera render --strategy auto` (profile, plan, render, compare).
+
+use anyhow::{bail, Context, Result};
+use plan::profile::SceneId;
+use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, SearchResult, Target};
+use render::integrator::{FilterScale, RenderSettings};
+use render::pathfootprint::FootprintMode;
+use render::scene::Scene;
+use serde_json::json;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use crate::{load_scene, parse_defines, write_atomic, DEFAULT_SCENE};
+
+/// Default share of the final render's samples that `--strategy auto` profiles.
+pub const DEFAULT_PROFILE_SHARE: f64 = 0.01;
+/// Share of the profiled pixels that take a second, timed sample (see `ProfileOptions`).
+const WARM_FRACTION: f64 = 0.25;
+/// Fewest samples a profile takes (or every pixel once).
+const MIN_PROFILE_SAMPLES: u64 = 4096;
+
+#[derive(clap::Args, Debug)]
+pub struct ProfileArgs {
+    /// Scene file (Mitsuba 3 XML); without it, the embedded demo scene.
+    scene: Option<PathBuf>,
+    /// Samples per traced pixel.
+    #[arg(long, default_value_t = 1)]
+    spp: u32,
+    /// Fraction of the pixels traced, in (0, 1].
+    #[arg(long, default_value_t = 0.25)]
+    pixel_fraction: f64,
+    /// Seed of the random streams (default: the scene's).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Override a scene <default>: -D name=value (repeatable).
+    #[arg(short = 'D', value_name = "NAME=VALUE")]
+    define: Vec<String>,
+    /// Texture filter width relative to the footprint (as for render).
+    #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<FilterScale>())]
+    filter_scale: FilterScale,
+    /// Where to write the profile.
+    #[arg(long, default_value = "profile.json")]
+    out: PathBuf,
+    /// No summary.
+    #[arg(long)]
+    quiet: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PlanArgs {
+    /// A profile (tessera.profile/1).
+    profile: PathBuf,
+    /// Memory budget of the tile cache in MiB.
+    #[arg(long, default_value_t = 512.0)]
+    budget_mb: f64,
+    /// Samples per pixel of the final render (default: the scene's).
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Threads of the final render (default: the profile's).
+    #[arg(long)]
+    threads: Option<u32>,
+    /// Where to write the plan.
+    #[arg(long, default_value = "plan.json")]
+    out: PathBuf,
+    /// Exhaustive search up to this many candidate nodes (local search beyond).
+    #[arg(long, default_value_t = 12)]
+    exhaustive_limit: usize,
+    /// Cache every level of a chosen node (no per-node level thresholds).
+    #[arg(long)]
+    no_thresholds: bool,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct AnalyzeArgs {
+    /// A profile (tessera.profile/1), written by tessera or another renderer.
+    profile: PathBuf,
+    /// Memory budget in MiB for the plan search.
+    #[arg(long, default_value_t = 512.0)]
+    budget_mb: f64,
+    /// Samples per pixel of the final render (default: the scene's).
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Threads of the final render (default: the profile's).
+    #[arg(long)]
+    threads: Option<u32>,
+    /// Measured renders (--stats-json files) to compare with their predictions.
+    #[arg(long = "measured")]
+    measured: Vec<PathBuf>,
+    /// Folder for the report (table.md and SVG plots).
+    #[arg(long)]
+    report: Option<PathBuf>,
+}
+
+/// The scene's identity: its file name and a hash of its text and defines.
+pub fn scene_id(path: Option<&Path>, defines: &[(String, String)]) -> Result<SceneId> {
+    let (name, text) = match path {
+        Some(p) => {
+            (p.display().to_string(), std::fs::read(p).with_context(|| format!("{}: cannot read", p.display()))?)
+        }
+        None => ("<embedded default scene>".to_string(), DEFAULT_SCENE.as_bytes().to_vec()),
+    };
+    let defs: String = defines.iter().map(|(k, v)| format!("{k}={v};")).collect();
+    Ok(SceneId { name, hash: render::profiling::fnv_hex(&[&text, defs.as_bytes()]) })
+}
+
+/// Profiles `scene` on the current rayon pool.
+pub fn profile_scene(scene: &Scene, settings: RenderSettings, pixel_fraction: f64, id: SceneId) -> Result<Profile> {
+    let opts = render::profiling::ProfileOptions { settings, pixel_fraction, warm_fraction: WARM_FRACTION, scene: id };
+    Ok(render::profiling::profile(scene, &opts)?)
+}
+
+/// The profile's settings for a final render: `share` of its samples (at least
+/// [`MIN_PROFILE_SAMPLES`]) as one sample on a hashed subset of the pixels (a quarter of them
+/// take a second, timed sample; see docs/selective-caching.md), or more samples per pixel when
+/// every pixel is traced.
+pub fn auto_profile_settings(scene: &Scene, final_settings: RenderSettings, share: f64) -> (RenderSettings, f64) {
+    let pixels = u64::from(scene.camera.width) * u64::from(scene.camera.height);
+    let want = ((pixels * u64::from(final_settings.spp)) as f64 * share).max(MIN_PROFILE_SAMPLES as f64);
+    let spp = (want / pixels as f64).ceil().max(1.0) as u32;
+    let fraction = (want / (pixels as f64 * f64::from(spp))).min(1.0);
+    // A different seed: the profile's samples are not the final render's.
+    let settings = RenderSettings { spp, seed: final_settings.seed ^ 0x5EED_0F_F11E, ..final_settings };
+    (settings, fraction)
+}
+
+/// Plans for `target` within `budget_bytes`.
+pub fn plan_profile(
+    profile: &Profile,
+    target: Target,
+    budget_bytes: f64,
+    opts: SearchOptions,
+) -> Result<(SearchResult, PlanFile)> {
+    let model = Model::new(profile, target)?;
+    let r = plan::search(&model, SearchOptions { budget_bytes, ..opts })?;
+    let file = PlanFile::new(profile, target, budget_bytes as u64, &r);
+    Ok((r, file))
+}
+
+/// What a render measured, in the model's terms.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Measured {
+    pub evaluations: f64,
+    pub lookups: f64,
+    pub tiles_filled: f64,
+    pub texels_filled: f64,
+    pub peak_bytes: f64,
+    pub render_s: f64,
+}
+
+impl Measured {
+    /// From a `tessera.stats/1` document.
+    pub fn from_stats(v: &serde_json::Value) -> Measured {
+        let f = |p: &str| v.pointer(p).and_then(|x| x.as_f64()).unwrap_or(0.0);
+        let evaluations = v
+            .get("graphs")
+            .and_then(|g| g.as_array())
+            .map(|gs| {
+                gs.iter()
+                    .flat_map(|g| g["nodes"].as_array().cloned().unwrap_or_default())
+                    .map(|n| n["evaluations"].as_f64().unwrap_or(0.0))
+                    .sum()
+            })
+            .unwrap_or(0.0);
+        Measured {
+            evaluations,
+            lookups: f("/cache/lookups"),
+            tiles_filled: f("/cache/tiles_filled"),
+            texels_filled: f("/cache/texels_filled"),
+            peak_bytes: f("/cache/peak_bytes"),
+            render_s: f("/phases/render_s"),
+        }
+    }
+}
+
+fn rel(pred: f64, meas: f64) -> String {
+    if meas == 0.0 && pred == 0.0 {
+        "0 %".into()
+    } else if meas == 0.0 {
+        "—".into()
+    } else {
+        format!("{:+.1} %", (pred - meas) / meas * 100.0)
+    }
+}
+
+fn mib(b: f64) -> f64 {
+    b / 1048576.0
+}
+
+/// Markdown rows comparing a prediction with a measurement.
+pub fn comparison_table(rows: &[(String, Prediction, Measured)]) -> String {
+    let mut s = String::from("| strategy | quantity | predicted | measured | error |\n|---|---|---|---|---|\n");
+    for (name, p, m) in rows {
+        let q = [
+            ("evaluations", p.evaluations, m.evaluations),
+            ("lookups", p.lookups, m.lookups),
+            ("tiles filled", p.tiles_filled, m.tiles_filled),
+            ("texels filled", p.texels_filled, m.texels_filled),
+            ("peak MiB", mib(p.peak_bytes), mib(m.peak_bytes)),
+            ("render s", p.render_s, m.render_s),
+        ];
+        for (label, pv, mv) in q {
+            let _ = writeln!(s, "| {name} | {label} | {pv:.4e} | {mv:.4e} | {} |", rel(pv, mv));
+        }
+    }
+    s
+}
+
+/// Markdown table of predictions for named plans.
+pub fn prediction_table(model: &Model, rows: &[(String, PlanSpec)]) -> String {
+    let mut s = String::from(
+        "| strategy | cached nodes | evaluations | lookups | tiles filled | MiB | texture thread-s | render s |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for (name, spec) in rows {
+        let p = model.predict(spec);
+        let _ = writeln!(
+            s,
+            "| {name} | {} | {:.3e} | {:.3e} | {:.0} | {:.1} | {:.2} | {:.2} |",
+            spec.count(),
+            p.evaluations,
+            p.lookups,
+            p.tiles_filled,
+            mib(p.peak_bytes),
+            p.texture_thread_s,
+            p.render_s
+        );
+    }
+    s
+}
+
+fn read_profile(path: &Path) -> Result<Profile> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("{}: cannot read", path.display()))?;
+    Profile::from_json(&text).with_context(|| format!("{}", path.display()))
+}
+
+fn target_for(profile: &Profile, spp: Option<u32>, threads: Option<u32>) -> Result<Target> {
+    let spp = spp.unwrap_or(profile.render.scene_spp);
+    if spp == 0 {
+        bail!("the profile does not say the scene's sample count: give --spp");
+    }
+    let samples = u64::from(profile.render.width) * u64::from(profile.render.height) * u64::from(spp);
+    Ok(Target { samples, threads: threads.unwrap_or(profile.render.threads).max(1) })
+}
+
+fn budget_bytes(mb: f64) -> Result<f64> {
+    if !(mb.is_finite() && mb > 0.0 && mb <= 1.0e6) {
+        bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {mb}");
+    }
+    Ok(mb * 1048576.0)
+}
+
+/// `tessera profile`.
+pub fn run_profile(args: ProfileArgs) -> Result<()> {
+    let defines = parse_defines(&args.define)?;
+    if args.spp == 0 || args.spp > 1 << 16 {
+        bail!("--spp must be between 1 and 65536, got {}", args.spp);
+    }
+    if !(args.pixel_fraction > 0.0 && args.pixel_fraction <= 1.0) {
+        bail!("--pixel-fraction must be in (0, 1], got {}", args.pixel_fraction);
+    }
+    if let Some(0) = args.threads {
+        bail!("--threads must be at least 1");
+    }
+    let scene = load_scene(args.scene.as_deref(), &defines)?;
+    if scene.graphs.is_empty() {
+        bail!("the scene has no procedural graphs: there is nothing to profile");
+    }
+    let id = scene_id(args.scene.as_deref(), &defines)?;
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let settings = RenderSettings {
+        filter_scale: args.filter_scale,
+        footprint: FootprintMode::default(),
+        ..RenderSettings::new(args.spp, args.seed.unwrap_or(scene.seed))
+    };
+    let profile = pool.install(|| profile_scene(&scene, settings, args.pixel_fraction, id))?;
+    write_atomic(&args.out, profile.to_json().as_bytes())?;
+    if !args.quiet {
+        eprintln!(
+            "profiled {} samples ({:.0} % of the pixels at {} spp) in {:.2} s: {} streams, texture work {:.2} thread-s; wrote {}",
+            profile.render.samples,
+            args.pixel_fraction * 100.0,
+            args.spp,
+            profile.render.wall_s,
+            profile.streams.len(),
+            profile.render.texture_thread_s,
+            args.out.display()
+        );
+    }
+    Ok(())
+}
+
+/// `tessera plan`.
+pub fn run_plan(args: PlanArgs) -> Result<()> {
+    let profile = read_profile(&args.profile)?;
+    let target = target_for(&profile, args.spp, args.threads)?;
+    let budget = budget_bytes(args.budget_mb)?;
+    let opts = SearchOptions {
+        budget_bytes: budget,
+        exhaustive_limit: args.exhaustive_limit.min(24),
+        thresholds: !args.no_thresholds,
+    };
+    let (r, file) = plan_profile(&profile, target, budget, opts)?;
+    let model = Model::new(&profile, target)?;
+    println!("{}", prediction_table(&model, &standard_rows(&profile, &r.plan)));
+    println!(
+        "plan: {} of {} candidate nodes cached ({}; {} plans predicted in {:.3} s); wrote {}",
+        r.plan.count(),
+        r.candidates,
+        r.method,
+        r.plans_evaluated,
+        r.seconds,
+        args.out.display()
+    );
+    write_atomic(&args.out, file.to_json().as_bytes())
+}
+
+/// `none`, `outputs`, `all` and the plan, named.
+pub fn standard_rows(profile: &Profile, plan: &PlanSpec) -> Vec<(String, PlanSpec)> {
+    vec![
+        ("none".into(), PlanSpec::none(profile)),
+        ("outputs".into(), PlanSpec::outputs(profile)),
+        ("all".into(), PlanSpec::all(profile)),
+        ("plan".into(), plan.clone()),
+    ]
+}
+
+/// The plan a measured render used: its cached node names (and thresholds of an auto plan).
+fn spec_of_stats(profile: &Profile, v: &serde_json::Value) -> Result<PlanSpec> {
+    let mut spec = PlanSpec::none(profile);
+    let names: Vec<&str> = v
+        .pointer("/cache/cached_nodes")
+        .and_then(|x| x.as_array())
+        .map(|a| a.iter().filter_map(|n| n.as_str()).collect())
+        .unwrap_or_default();
+    for name in names {
+        let mut found = false;
+        for (g, graph) in profile.graphs.iter().enumerate() {
+            if let Some(n) = graph.nodes.iter().position(|n| n.name == name) {
+                let min = v
+                    .pointer("/plan/nodes")
+                    .and_then(|x| x.as_array())
+                    .and_then(|a| a.iter().find(|p| p["node"].as_str() == Some(name)))
+                    .and_then(|p| p["min_level"].as_u64())
+                    .unwrap_or(0);
+                spec.cached[g][n] = Some(min as u8);
+                found = true;
+            }
+        }
+        if !found {
+            bail!("the measured render caches node '{name}', which the profile does not have (another scene?)");
+        }
+    }
+    Ok(spec)
+}
+
+/// `tessera analyze`.
+pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
+    let profile = read_profile(&args.profile)?;
+    let target = target_for(&profile, args.spp, args.threads)?;
+    let budget = budget_bytes(args.budget_mb)?;
+    let (r, _) = plan_profile(&profile, target, budget, SearchOptions::with_budget(budget))?;
+    let model = Model::new(&profile, target)?;
+    let mut md = String::new();
+    let _ = writeln!(md, "# Analysis of {} ({})\n", args.profile.display(), profile.scene.name);
+    let _ = writeln!(
+        md,
+        "Target: {} samples on {} threads; budget {:.0} MiB.\n",
+        target.samples, target.threads, args.budget_mb
+    );
+    let _ = writeln!(md, "{}", prediction_table(&model, &standard_rows(&profile, &r.plan)));
+    let _ = writeln!(md, "{}", node_table(&profile, &model.predict(&r.plan), &r.plan));
+    let mut rows = Vec::new();
+    for m in &args.measured {
+        let text = std::fs::read_to_string(m).with_context(|| format!("{}: cannot read", m.display()))?;
+        let v: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", m.display()))?;
+        if v["schema"] != "tessera.stats/1" {
+            bail!("{}: not a tessera.stats/1 document", m.display());
+        }
+        let spec = spec_of_stats(&profile, &v).with_context(|| format!("{}", m.display()))?;
+        let t = Target {
+            samples: v.pointer("/counts/samples").and_then(|x| x.as_u64()).unwrap_or(target.samples).max(1),
+            threads: v["threads"].as_u64().map_or(target.threads, |t| t as u32),
+        };
+        let pred = Model::new(&profile, t)?.predict(&spec);
+        let name = v.pointer("/cache/strategy").and_then(|s| s.as_str()).unwrap_or("none").to_string();
+        rows.push((name, pred, Measured::from_stats(&v)));
+    }
+    if !rows.is_empty() {
+        let _ = writeln!(md, "## Predicted against measured\n\n{}", comparison_table(&rows));
+    }
+    println!("{md}");
+    if let Some(dir) = &args.report {
+        write_report(dir, &profile, &md, &rows)?;
+        eprintln!("wrote {}", dir.display());
+    }
+    Ok(())
+}
+
+/// Per node: what the model predicts under the plan.
+pub fn node_table(profile: &Profile, p: &Prediction, plan: &PlanSpec) -> String {
+    let mut s = String::from(
+        "| node | category | cached (min level) | evaluations | lookups | tiles | MiB | thread-s |\n|---|---|---|---|---|---|---|---|\n",
+    );
+    for (g, graph) in profile.graphs.iter().enumerate() {
+        for (n, node) in graph.nodes.iter().enumerate() {
+            let np = &p.nodes[g][n];
+            if np.evaluations == 0.0 && np.lookups == 0.0 {
+                continue;
+            }
+            let cached = plan.cached[g][n].map_or("—".to_string(), |m| format!("yes ({m})"));
+            let _ = writeln!(
+                s,
+                "| {} | {} | {cached} | {:.3e} | {:.3e} | {:.0} | {:.2} | {:.3} |",
+                node.name,
+                node.category,
+                np.evaluations,
+                np.lookups,
+                np.tiles,
+                mib(np.bytes),
+                np.thread_s
+            );
+        }
+    }
+    s
+}
+
+/// Writes `table.md`, `levels.svg` and (with measurements) `predicted_vs_measured.svg`.
+pub fn write_report(dir: &Path, profile: &Profile, md: &str, rows: &[(String, Prediction, Measured)]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
+    write_atomic(&dir.join("table.md"), md.as_bytes())?;
+    write_atomic(&dir.join("levels.svg"), levels_svg(profile).as_bytes())?;
+    if !rows.is_empty() {
+        write_atomic(&dir.join("predicted_vs_measured.svg"), scatter_svg(rows).as_bytes())?;
+    }
+    Ok(())
+}
+
+/// Small multiples: per stream (the nodes one material reads together), its requests by
+/// footprint level.
+pub fn levels_svg(profile: &Profile) -> String {
+    let (cw, ch) = (320.0, 150.0);
+    let cols = 2usize;
+    let n = profile.streams.len().max(1);
+    let rows = n.div_ceil(cols);
+    let (w, h) = (cw * cols as f64, ch * rows as f64 + 30.0);
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"10\">\n<text x=\"8\" y=\"18\" font-size=\"13\">Requests by footprint level (level −1: finer than level 0)</text>\n"
+    );
+    let max_level = i32::from(profile.cache.max_level);
+    for (k, st) in profile.streams.iter().enumerate() {
+        let (x0, y0) = ((k % cols) as f64 * cw, 30.0 + (k / cols) as f64 * ch);
+        let total: u64 = st.total_requests().max(1);
+        let peak = st.requests.iter().map(|r| r.requests).max().unwrap_or(1).max(1) as f64;
+        let graph = &profile.graphs[st.graph as usize];
+        let _ = writeln!(
+            s,
+            "<text x=\"{}\" y=\"{}\">{} · {} ({} requests)</text>",
+            x0 + 8.0,
+            y0 + 12.0,
+            xml_escape(&st.material),
+            xml_escape(&graph.name),
+            total
+        );
+        let bins = (max_level + 2) as f64;
+        let bw = (cw - 30.0) / bins;
+        for r in &st.requests {
+            let bh = (ch - 40.0) * r.requests as f64 / peak;
+            let x = x0 + 20.0 + f64::from(r.level + 1) * bw;
+            let _ = writeln!(
+                s,
+                "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{bh:.1}\" fill=\"#4a7fb5\"><title>level {}: {}</title></rect>",
+                y0 + ch - 20.0 - bh,
+                bw * 0.9,
+                r.level,
+                r.requests
+            );
+        }
+        for l in (-1..=max_level).step_by(4) {
+            let x = x0 + 20.0 + f64::from(l + 1) * bw;
+            let _ = writeln!(s, "<text x=\"{x:.1}\" y=\"{:.1}\">{l}</text>", y0 + ch - 8.0);
+        }
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// Predicted against measured, log–log, one point per (strategy, quantity), with the diagonal.
+pub fn scatter_svg(rows: &[(String, Prediction, Measured)]) -> String {
+    let size = 420.0;
+    let pad = 50.0;
+    let mut pts = Vec::new();
+    for (name, p, m) in rows {
+        for (q, pv, mv) in [
+            ("evaluations", p.evaluations, m.evaluations),
+            ("lookups", p.lookups, m.lookups),
+            ("tiles", p.tiles_filled, m.tiles_filled),
+            ("bytes", p.peak_bytes, m.peak_bytes),
+            ("seconds", p.render_s, m.render_s),
+        ] {
+            if pv > 0.0 && mv > 0.0 {
+                pts.push((format!("{name} {q}"), pv.log10(), mv.log10()));
+            }
+        }
+    }
+    let lo = pts.iter().flat_map(|p| [p.1, p.2]).fold(f64::INFINITY, f64::min).floor();
+    let hi = pts.iter().flat_map(|p| [p.1, p.2]).fold(f64::NEG_INFINITY, f64::max).ceil();
+    let (lo, hi) = if lo.is_finite() && hi > lo { (lo, hi) } else { (0.0, 1.0) };
+    let map = |v: f64| pad + (v - lo) / (hi - lo) * (size - 2.0 * pad);
+    let mut s = format!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{size}\" height=\"{size}\" font-family=\"sans-serif\" font-size=\"10\">\n<text x=\"8\" y=\"16\" font-size=\"13\">Predicted (x) against measured (y), log10</text>\n<line x1=\"{pad}\" y1=\"{}\" x2=\"{}\" y2=\"{pad}\" stroke=\"#999\"/>\n",
+        size - pad,
+        size - pad
+    );
+    for d in (lo as i64)..=(hi as i64) {
+        let v = map(d as f64);
+        let _ = writeln!(s, "<text x=\"{v:.1}\" y=\"{:.1}\">1e{d}</text>", size - pad + 14.0);
+        let _ = writeln!(s, "<text x=\"4\" y=\"{:.1}\">1e{d}</text>", size - v);
+    }
+    for (label, x, y) in &pts {
+        let _ = writeln!(
+            s,
+            "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"3\" fill=\"#c0504d\"><title>{}</title></circle>",
+            map(*x),
+            size - map(*y),
+            xml_escape(label)
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+fn xml_escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
+}
+
+/// The result of `--strategy auto`'s profiling and planning, for the summary and the stats.
+pub struct AutoPlan {
+    pub profile: Profile,
+    pub result: SearchResult,
+    pub file: PlanFile,
+    pub target: Target,
+    pub profile_s: f64,
+    pub plan_s: f64,
+}
+
+/// Profiles and plans for `--strategy auto` (on the current rayon pool).
+pub fn auto_plan(
+    scene: &Scene,
+    scene_path: Option<&Path>,
+    defines: &[(String, String)],
+    settings: RenderSettings,
+    share: f64,
+    budget: usize,
+) -> Result<AutoPlan> {
+    let t = std::time::Instant::now();
+    let (psettings, fraction) = auto_profile_settings(scene, settings, share);
+    let profile = profile_scene(scene, psettings, fraction, scene_id(scene_path, defines)?)?;
+    let profile_s = t.elapsed().as_secs_f64();
+    let t = std::time::Instant::now();
+    let target = Target {
+        samples: u64::from(scene.camera.width) * u64::from(scene.camera.height) * u64::from(settings.spp),
+        threads: rayon::current_num_threads() as u32,
+    };
+    let (result, file) = plan_profile(&profile, target, budget as f64, SearchOptions::with_budget(budget as f64))?;
+    Ok(AutoPlan { profile, result, file, target, profile_s, plan_s: t.elapsed().as_secs_f64() })
+}
+
+impl AutoPlan {
+    /// The `"plan"` object of the stats JSON.
+    pub fn stats_json(&self) -> serde_json::Value {
+        json!({
+            "strategy": "auto",
+            "profile_s": self.profile_s,
+            "plan_s": self.plan_s,
+            "profile_samples": self.profile.render.samples,
+            "method": self.result.method,
+            "candidates": self.result.candidates,
+            "plans_evaluated": self.result.plans_evaluated,
+            "cached_nodes": self.file.nodes.iter().map(|n| n.node.clone()).collect::<Vec<_>>(),
+            "nodes": self.file.nodes,
+            "predicted": self.file.predicted,
+        })
+    }
+}
