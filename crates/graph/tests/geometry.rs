@@ -3,6 +3,9 @@
 //! supersampling over a surface's uv footprint, `Graph::is_uv_only`, and load-time warnings
 //! and errors.
 
+// Channel loops index several per-channel arrays at once.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::Rng;

@@ -5,7 +5,7 @@
 mod common;
 
 use glam::Vec2;
-use graph::{Document, EvalScratch, Footprint, LoadError, LoadErrorKind, LoadOptions};
+use graph::{Document, EvalScratch, Footprint, LoadError, LoadErrorKind, LoadOptions, MaterialSource};
 use std::path::{Path, PathBuf};
 
 /// A fresh folder for one test's files.
@@ -165,7 +165,17 @@ fn versions_1_36_to_1_38_are_upgraded() {
     <output name="c" type="vector3" nodename="c" />
     <output name="t" type="float" nodename="t" />
     <output name="k" type="vector2" nodename="k" />
-  </nodegraph>"#,
+    <constant name="cc" type="color3">
+      <parameter name="value" type="color3" value="0.1, 0.2, 0.3" />
+    </constant>
+    <output name="col" type="color3" nodename="cc" />
+  </nodegraph>
+  <material name="M">
+    <shaderref name="SR" node="standard_surface">
+      <bindinput name="base_color" type="color3" nodegraph="g" output="col" />
+      <bindparam name="metalness" type="float" value="0.5" />
+    </shaderref>
+  </material>"#,
     );
     let p = write(&d, "v136.mtlx", &v136);
     let doc136 = Document::load(&p).unwrap();
@@ -174,6 +184,11 @@ fn versions_1_36_to_1_38_are_upgraded() {
     // 1.36/1.37's atan2(in1, in2) became atan2(iny = in2, inx = in1).
     assert!(close(&eval(&doc136, "g/t", uv), &[2.0f32.atan2(1.0)], 1e-6));
     assert!(close(&eval(&doc136, "g/k", uv), &[0.25, 0.75], 1e-6));
+    // A `<material>` with a `<shaderref>` is a material bound to a standard_surface.
+    let m = doc136.material("M").expect("material M");
+    assert_eq!(m.shader, "SR");
+    assert_eq!(m.get("base_color"), Some(&MaterialSource::Output(doc136.graph().output_id("g/col").unwrap())));
+    assert!(matches!(m.get("metalness"), Some(MaterialSource::Constant(v)) if v.v[0] == 0.5));
 
     let v138 = doc(
         "1.38",

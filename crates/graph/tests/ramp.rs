@@ -2,6 +2,9 @@
 //! graph, transcribed node for node into library nodes), filtered against brute-force Gaussian
 //! quadrature of the unfiltered ramp, and the filtered slope against finite differences.
 
+// Channel loops index several per-channel arrays at once.
+#![allow(clippy::needless_range_loop)]
+
 use glam::{Mat2, Vec2};
 use graph::{Document, EvalScratch, Footprint, Graph, LoadOptions, OutputId};
 use std::fmt::Write as _;

@@ -128,12 +128,12 @@ fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String],
                 count += 1;
                 sum += e as f64;
                 let tol = if textured { IMAGE_MAX * range } else { ANALYTIC_TOL * want.abs().max(1.0) };
-                if !(e <= tol) {
+                if e > tol {
                     off += 1;
                     cols = (cols.0.min(i), cols.1.max(i));
                     rows = (rows.0.min(j), rows.1.max(j));
                 }
-                if !(e <= worst.0) {
+                if e > worst.0 {
                     worst = (e, i, j, k, got, want);
                 }
             }

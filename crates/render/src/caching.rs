@@ -105,9 +105,7 @@ pub(crate) fn channels(ty: ValueType) -> Option<u8> {
 /// on the shading point through uv alone (a texture over uv cannot hold what varies with the
 /// surface's position or frame).
 pub(crate) fn worth_caching(g: &Graph, id: NodeId) -> bool {
-    !matches!(g.node_category(id), "texcoord" | "constant")
-        && g.node_type(id) != ValueType::Vector2
-        && g.is_uv_only(id)
+    !matches!(g.node_category(id), "texcoord" | "constant") && g.node_type(id) != ValueType::Vector2 && g.is_uv_only(id)
 }
 
 /// Marks the nodes of `plan` in `chosen` with their finest cached levels; errors name nodes the

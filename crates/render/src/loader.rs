@@ -751,6 +751,9 @@ impl Builder {
             graph::Document::load(&path)
         }
         .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
+        for w in doc.graph().warnings() {
+            eprintln!("warning: {}: {w}", path.display());
+        }
         let doc = Arc::new(doc);
         let index = self.graphs.len() as u32;
         self.graphs.push(SceneGraph { name: path.display().to_string(), document: doc.clone() });

@@ -469,7 +469,7 @@ pub fn calibrate() -> (f64, f64, f64) {
     let fill = |r: TexelRequest| [r.uv.x, r.uv.y, 0.5];
     // Fills: one lookup per tile of level 0 along a row, each filling one new tile.
     let d = f64::from(LEVEL0_TEXELS_PER_UV);
-    let tiles = 2000;
+    let tiles = 500;
     let texel = Filter::TRILINEAR;
     let t = Instant::now();
     for k in 0..tiles {
@@ -487,7 +487,7 @@ pub fn calibrate() -> (f64, f64, f64) {
         s ^= s << 17;
         (s >> 40) as f32 / (1u64 << 24) as f32
     };
-    let n = 200_000;
+    let n = 40_000;
     let span = (tiles * tile_size as usize) as f32 / LEVEL0_TEXELS_PER_UV;
     let queries: Vec<(glam::Vec2, glam::Mat2)> = (0..n)
         .map(|_| {
@@ -507,7 +507,7 @@ pub fn calibrate() -> (f64, f64, f64) {
     let lookup_ns = t.elapsed().as_secs_f64() * 1e9 / n as f64;
     std::hint::black_box(acc);
     // One timing: two clock reads and the subtraction.
-    let reps = 100_000;
+    let reps = 20_000;
     let t = Instant::now();
     let mut sink = 0u128;
     for _ in 0..reps {

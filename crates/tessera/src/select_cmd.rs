@@ -439,102 +439,60 @@ pub fn write_report(dir: &Path, profile: &Profile, md: &str, rows: &[(String, Pr
     Ok(())
 }
 
-/// Small multiples: per stream (the nodes one material reads together), its requests by
-/// footprint level.
+/// Requests by footprint level, one histogram per stream (the nodes one material reads
+/// together), side by side in one SVG.
 pub fn levels_svg(profile: &Profile) -> String {
-    let (cw, ch) = (320.0, 150.0);
-    let cols = 2usize;
-    let n = profile.streams.len().max(1);
-    let rows = n.div_ceil(cols);
-    let (w, h) = (cw * cols as f64, ch * rows as f64 + 30.0);
-    let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"10\">\n<text x=\"8\" y=\"18\" font-size=\"13\">Requests by footprint level (level −1: finer than level 0)</text>\n"
-    );
-    let max_level = i32::from(profile.cache.max_level);
-    for (k, st) in profile.streams.iter().enumerate() {
-        let (x0, y0) = ((k % cols) as f64 * cw, 30.0 + (k / cols) as f64 * ch);
-        let total: u64 = st.total_requests().max(1);
-        let peak = st.requests.iter().map(|r| r.requests).max().unwrap_or(1).max(1) as f64;
-        let graph = &profile.graphs[st.graph as usize];
-        let _ = writeln!(
-            s,
-            "<text x=\"{}\" y=\"{}\">{} · {} ({} requests)</text>",
-            x0 + 8.0,
-            y0 + 12.0,
-            xml_escape(&st.material),
-            xml_escape(&graph.name),
-            total
-        );
-        let bins = (max_level + 2) as f64;
-        let bw = (cw - 30.0) / bins;
-        for r in &st.requests {
-            let bh = (ch - 40.0) * r.requests as f64 / peak;
-            let x = x0 + 20.0 + f64::from(r.level + 1) * bw;
-            let _ = writeln!(
-                s,
-                "<rect x=\"{x:.1}\" y=\"{:.1}\" width=\"{:.1}\" height=\"{bh:.1}\" fill=\"#4a7fb5\"><title>level {}: {}</title></rect>",
-                y0 + ch - 20.0 - bh,
-                bw * 0.9,
-                r.level,
-                r.requests
-            );
-        }
-        for l in (-1..=max_level).step_by(4) {
-            let x = x0 + 20.0 + f64::from(l + 1) * bw;
-            let _ = writeln!(s, "<text x=\"{x:.1}\" y=\"{:.1}\">{l}</text>", y0 + ch - 8.0);
-        }
-    }
-    s.push_str("</svg>\n");
-    s
+    let range = (-1i64, i64::from(profile.cache.max_level));
+    let charts: Vec<String> = profile
+        .streams
+        .iter()
+        .map(|st| {
+            let bins: Vec<(i64, f64)> = st.requests.iter().map(|r| (i64::from(r.level), r.requests as f64)).collect();
+            let title = format!("{} · {}", st.material, profile.graphs[st.graph as usize].name);
+            crate::svg::histogram(&title, &bins, range, "#4a7fb5")
+        })
+        .collect();
+    side_by_side(&charts, 200.0, 104.0)
 }
 
-/// Predicted against measured, log–log, one point per (strategy, quantity), with the diagonal.
+/// Predicted against measured, one chart per quantity, side by side in one SVG.
 pub fn scatter_svg(rows: &[(String, Prediction, Measured)]) -> String {
-    let size = 420.0;
-    let pad = 50.0;
-    let mut pts = Vec::new();
-    for (name, p, m) in rows {
-        for (q, pv, mv) in [
-            ("evaluations", p.evaluations, m.evaluations),
-            ("lookups", p.lookups, m.lookups),
-            ("tiles", p.tiles_filled, m.tiles_filled),
-            ("bytes", p.peak_bytes, m.peak_bytes),
-            ("seconds", p.render_s, m.render_s),
-        ] {
-            if pv > 0.0 && mv > 0.0 {
-                pts.push((format!("{name} {q}"), pv.log10(), mv.log10()));
-            }
-        }
-    }
-    let lo = pts.iter().flat_map(|p| [p.1, p.2]).fold(f64::INFINITY, f64::min).floor();
-    let hi = pts.iter().flat_map(|p| [p.1, p.2]).fold(f64::NEG_INFINITY, f64::max).ceil();
-    let (lo, hi) = if lo.is_finite() && hi > lo { (lo, hi) } else { (0.0, 1.0) };
-    let map = |v: f64| pad + (v - lo) / (hi - lo) * (size - 2.0 * pad);
+    let quantity = |label: &str, f: fn(&Prediction, &Measured) -> (f64, f64)| {
+        let pts: Vec<(String, f64, f64)> = rows
+            .iter()
+            .map(|(name, p, m)| {
+                let (x, y) = f(p, m);
+                (name.clone(), x, y)
+            })
+            .collect();
+        crate::svg::scatter(label, &pts, "")
+    };
+    let charts = [
+        quantity("evaluations", |p, m| (p.evaluations, m.evaluations)),
+        quantity("cache lookups", |p, m| (p.lookups, m.lookups)),
+        quantity("tiles filled", |p, m| (p.tiles_filled, m.tiles_filled)),
+        quantity("peak bytes", |p, m| (p.peak_bytes, m.peak_bytes)),
+        quantity("render seconds", |p, m| (p.render_s, m.render_s)),
+    ];
+    side_by_side(&charts, 300.0, 280.0)
+}
+
+/// Chart SVGs of size `w × h` nested in one document, in rows of three.
+fn side_by_side(charts: &[String], w: f64, h: f64) -> String {
+    let cols = charts.len().clamp(1, 3);
+    let rows = charts.len().div_ceil(cols).max(1);
     let mut s = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{size}\" height=\"{size}\" font-family=\"sans-serif\" font-size=\"10\">\n<text x=\"8\" y=\"16\" font-size=\"13\">Predicted (x) against measured (y), log10</text>\n<line x1=\"{pad}\" y1=\"{}\" x2=\"{}\" y2=\"{pad}\" stroke=\"#999\"/>\n",
-        size - pad,
-        size - pad
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"10\">\n",
+        w * cols as f64,
+        h * rows as f64
     );
-    for d in (lo as i64)..=(hi as i64) {
-        let v = map(d as f64);
-        let _ = writeln!(s, "<text x=\"{v:.1}\" y=\"{:.1}\">1e{d}</text>", size - pad + 14.0);
-        let _ = writeln!(s, "<text x=\"4\" y=\"{:.1}\">1e{d}</text>", size - v);
-    }
-    for (label, x, y) in &pts {
-        let _ = writeln!(
-            s,
-            "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"3\" fill=\"#c0504d\"><title>{}</title></circle>",
-            map(*x),
-            size - map(*y),
-            xml_escape(label)
-        );
+    for (k, c) in charts.iter().enumerate() {
+        let (x, y) = ((k % cols) as f64 * w, (k / cols) as f64 * h);
+        s.push_str(&c.replacen("<svg ", &format!("<svg x=\"{x}\" y=\"{y}\" "), 1));
+        s.push('\n');
     }
     s.push_str("</svg>\n");
     s
-}
-
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
 /// The result of `--strategy auto`'s profiling and planning, for the summary and the stats.
