@@ -50,10 +50,9 @@ pub struct ProfileArgs {
     quiet: bool,
 }
 
+/// The final render a plan is for.
 #[derive(clap::Args, Debug)]
-pub struct PlanArgs {
-    /// A profile (tessera.profile/1).
-    profile: PathBuf,
+pub struct FinalRender {
     /// Memory budget of the tile cache in MiB.
     #[arg(long, default_value_t = 512.0)]
     budget_mb: f64,
@@ -63,6 +62,14 @@ pub struct PlanArgs {
     /// Threads of the final render (default: the profile's).
     #[arg(long)]
     threads: Option<u32>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct PlanArgs {
+    /// A profile (tessera.profile/1).
+    profile: PathBuf,
+    #[command(flatten)]
+    render: FinalRender,
     /// Where to write the plan.
     #[arg(long, default_value = "plan.json")]
     out: PathBuf,
@@ -78,15 +85,8 @@ pub struct PlanArgs {
 pub struct AnalyzeArgs {
     /// A profile (tessera.profile/1), written by tessera or another renderer.
     profile: PathBuf,
-    /// Memory budget in MiB for the plan search.
-    #[arg(long, default_value_t = 512.0)]
-    budget_mb: f64,
-    /// Samples per pixel of the final render (default: the scene's).
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Threads of the final render (default: the profile's).
-    #[arg(long)]
-    threads: Option<u32>,
+    #[command(flatten)]
+    render: FinalRender,
     /// Measured renders (--stats-json files) to compare with their predictions.
     #[arg(long = "measured")]
     measured: Vec<PathBuf>,
@@ -296,8 +296,8 @@ pub fn run_profile(args: ProfileArgs) -> Result<()> {
 /// `tessera plan`.
 pub fn run_plan(args: PlanArgs) -> Result<()> {
     let profile = read_profile(&args.profile)?;
-    let target = target_for(&profile, args.spp, args.threads)?;
-    let budget = budget_bytes(args.budget_mb)?;
+    let target = target_for(&profile, args.render.spp, args.render.threads)?;
+    let budget = budget_bytes(args.render.budget_mb)?;
     let opts = SearchOptions {
         budget_bytes: budget,
         exhaustive_limit: args.exhaustive_limit.min(24),
@@ -360,8 +360,8 @@ fn spec_of_stats(profile: &Profile, v: &serde_json::Value) -> Result<PlanSpec> {
 /// `tessera analyze`.
 pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
     let profile = read_profile(&args.profile)?;
-    let target = target_for(&profile, args.spp, args.threads)?;
-    let budget = budget_bytes(args.budget_mb)?;
+    let target = target_for(&profile, args.render.spp, args.render.threads)?;
+    let budget = budget_bytes(args.render.budget_mb)?;
     let (r, _) = plan_profile(&profile, target, budget, SearchOptions::with_budget(budget))?;
     let model = Model::new(&profile, target)?;
     let mut md = String::new();
@@ -369,7 +369,7 @@ pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
     let _ = writeln!(
         md,
         "Target: {} samples on {} threads; budget {:.0} MiB.\n",
-        target.samples, target.threads, args.budget_mb
+        target.samples, target.threads, args.render.budget_mb
     );
     let _ = writeln!(md, "{}", prediction_table(&model, &standard_rows(&profile, &r.plan)));
     let _ = writeln!(md, "{}", node_table(&profile, &model.predict(&r.plan), &r.plan));

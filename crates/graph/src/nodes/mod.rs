@@ -342,3 +342,15 @@ pub(crate) mod types {
         matches!(t, Color3 | Color4)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// The evaluator's fixed input array holds every definition's inputs.
+    #[test]
+    fn every_definition_fits_the_input_array() {
+        for c in super::supported() {
+            let d = super::definition(c).unwrap();
+            assert!(d.inputs.len() <= super::MAX_INPUTS, "{c}: {} inputs", d.inputs.len());
+        }
+    }
+}
