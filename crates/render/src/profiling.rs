@@ -159,14 +159,29 @@ fn traced(x: u32, y: u32, fraction: f64) -> bool {
 /// Per tile of the image: the tap, counters and the evaluator's binned timings and statistics.
 type TileProfile = (Tap, RenderCounts, Vec<graph::BinnedTimings>, Vec<graph::EvalStats>, Warm);
 
-/// Thread-nanoseconds of the samples after a pixel's first, and how many: a render's samples of
+/// Per sample after a pixel's first: nanoseconds outside graph evaluation. A render's samples of
 /// one pixel share warm processor caches, so these, not first samples, tell the per-sample cost
 /// of a render with many samples per pixel.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 struct Warm {
-    samples: u64,
-    path_ns: u64,
-    eval_ns: u64,
+    outside_ns: Vec<u64>,
+}
+
+impl Warm {
+    /// Mean nanoseconds per sample, leaving out samples above 50 × the median: one-time costs
+    /// (the first use of a lazily built table, a page fault) that a profile's few thousand
+    /// samples would otherwise extrapolate to the whole render (seen: one 61 ms sample among
+    /// 5000 of about 1 µs).
+    fn robust_mean(&mut self) -> Option<f64> {
+        if self.outside_ns.is_empty() {
+            return None;
+        }
+        self.outside_ns.sort_unstable();
+        let median = self.outside_ns[self.outside_ns.len() / 2];
+        let kept: Vec<u64> =
+            self.outside_ns.iter().copied().filter(|&t| t <= median.saturating_mul(50).max(1)).collect();
+        Some(kept.iter().sum::<u64>() as f64 / kept.len().max(1) as f64)
+    }
 }
 
 /// One pixel's samples (as `render_pixel_with` takes them) and `extra` more, timing those after
@@ -195,9 +210,9 @@ fn profile_pixel(
         crate::integrator::radiance(scene, settings, &cam, &mut rng, counts, shade, &mut NoObserver);
         counts.samples += 1;
         if s > 0 {
-            warm.samples += 1;
-            warm.path_ns += t.elapsed().as_nanos() as u64;
-            warm.eval_ns += shade.tap.as_ref().expect("profiling").exact_eval_ns - before;
+            let ns = t.elapsed().as_nanos() as u64;
+            let eval = shade.tap.as_ref().expect("profiling").exact_eval_ns - before;
+            warm.outside_ns.push(ns.saturating_sub(eval));
         }
     }
 }
@@ -255,11 +270,9 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     let mut first_samples = 0u64;
     for (t, c, b, s, w) in &results {
         tap.merge(t);
-        warm.samples += w.samples;
-        warm.path_ns += w.path_ns;
-        warm.eval_ns += w.eval_ns;
+        warm.outside_ns.extend_from_slice(&w.outside_ns);
         counts.samples += c.samples;
-        first_samples += c.samples - w.samples;
+        first_samples += c.samples - w.outside_ns.len() as u64;
         if binned.is_empty() {
             binned = b.clone();
         } else {
@@ -276,11 +289,7 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
         return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
     }
     // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
-    let outside_thread_s = if warm.samples > 0 {
-        (warm.path_ns - warm.eval_ns.min(warm.path_ns)) as f64 / warm.samples as f64 * counts.samples as f64 * 1e-9
-    } else {
-        0.0
-    };
+    let outside_thread_s = warm.robust_mean().map_or(0.0, |ns| ns * counts.samples as f64 * 1e-9);
     let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
     let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
     let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
