@@ -95,7 +95,7 @@ impl Tap {
         scratch: &mut EvalScratch,
         out: &mut [Filtered],
     ) {
-        let timed = self.calls % CALL_TIMING_PERIOD == 0;
+        let timed = self.calls.is_multiple_of(CALL_TIMING_PERIOD);
         self.calls += 1;
         let t_all = self.exact.then(Instant::now);
         let t0 = timed.then(Instant::now);

@@ -123,7 +123,7 @@ pub fn auto_profile_settings(scene: &Scene, final_settings: RenderSettings, shar
     let spp = (want / pixels as f64).ceil().max(1.0) as u32;
     let fraction = (want / (pixels as f64 * f64::from(spp))).min(1.0);
     // A different seed: the profile's samples are not the final render's.
-    let settings = RenderSettings { spp, seed: final_settings.seed ^ 0x5EED_0F_F11E, ..final_settings };
+    let settings = RenderSettings { spp, seed: final_settings.seed ^ 0x005E_ED0F_F11E, ..final_settings };
     (settings, fraction)
 }
 

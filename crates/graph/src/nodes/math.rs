@@ -17,6 +17,7 @@
 //! | `sqrt`, `ln` (`in` = 1), `power` (`in2` = 1), `tan`, `asin`, `acos` | | 5-point Gauss–Hermite (uniform exponent), cubature otherwise |
 //! | `atan2` | `iny` (0), `inx` (1) | cubature |
 //! | `dotproduct`, `magnitude`, `distance`, `normalize` | vectors | exact for a uniform operand of `dotproduct`; cubature otherwise |
+//! | `and`, `or`, `xor`, `not` | booleans `in1`, `in2` (false) / `in` (false) | a boolean's mean is the probability that it is true over the footprint; the operands are taken as independent: `p1 p2`, `p1 + p2 − p1 p2`, `p1 + p2 − 2 p1 p2`, `1 − p` (exact at points) |
 //! | `ifgreater`, `ifgreatereq`, `ifequal` | `value1` (1), `value2` (0), `in1` (0), `in2` (0) | `mix(in2, in1, P(value1 > value2))` with the probability from the difference's Gaussian; boolean variants output the probability itself |
 //!
 //! Cubature and Hermite rules treat channels as Gaussian and independent; at Σ = 0 every rule
@@ -58,6 +59,10 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "max",
     "smoothstep",
     "remap",
+    "and",
+    "or",
+    "xor",
+    "not",
     "range",
     "mix",
     "dotproduct",
@@ -146,6 +151,14 @@ pub enum MathOp {
     IfGreaterEq,
     /// ifequal
     IfEqual,
+    /// and
+    And,
+    /// or
+    Or,
+    /// xor
+    Xor,
+    /// not
+    Not,
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -198,6 +211,8 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "mix" => (&[inp!("fg", Out, Zero), inp!("bg", Out, Zero), inp!("mix", OutOrFloat, Zero)], types::numeric),
         "dotproduct" | "distance" => (&[inp!("in1", Any, Zero), inp!("in2", SameAs(0), Zero)], types::float),
         "magnitude" => (&[inp!("in", Any, Zero)], types::float),
+        "and" | "or" | "xor" => (&[inp!("in1", Bool, Zero), inp!("in2", Bool, Zero)], types::boolean),
+        "not" => (&[inp!("in", Bool, Zero)], types::boolean),
         "ifgreater" | "ifgreatereq" | "ifequal" => (
             &[
                 inp!("value1", Scalar, One),
@@ -252,6 +267,10 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "normalize" => Normalize,
         "ifgreater" => IfGreater,
         "ifgreatereq" => IfGreaterEq,
+        "and" => And,
+        "or" => Or,
+        "xor" => Xor,
+        "not" => Not,
         _ => IfEqual,
     }))
 }
@@ -492,7 +511,9 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
             }
         }
         Mix => mix(x[1], a, x[2], fp),
-        IfGreater | IfGreaterEq | IfEqual => unreachable!("conditionals are evaluated per node"),
+        IfGreater | IfGreaterEq | IfEqual | And | Or | Xor | Not => {
+            unreachable!("conditionals and logic are evaluated per node")
+        }
         Dot | Magnitude | Distance | Normalize => unreachable!("vector ops are evaluated per node"),
     }
 }
@@ -506,6 +527,20 @@ fn smoothstep_point(x: f64, lo: f64, hi: f64) -> f64 {
         let t = (x - lo) / (hi - lo);
         t * t * (3.0 - 2.0 * t)
     }
+}
+
+/// `and`, `or`, `xor`, `not` of independent events with probabilities the operands' means:
+/// the result's probability, its uv gradient by the product rule, and the Bernoulli variance.
+fn logic(op: MathOp, a: &Moments, b: Option<&Moments>) -> Moments {
+    let p = a.mean.clamp(0.0, 1.0);
+    let (q, gq) = b.map_or((0.0, Vec2::ZERO), |b| (b.mean.clamp(0.0, 1.0), b.grad));
+    let (r, grad) = match op {
+        MathOp::And => (p * q, a.grad * q + gq * p),
+        MathOp::Or => (p + q - p * q, a.grad * (1.0 - q) + gq * (1.0 - p)),
+        MathOp::Xor => (p + q - 2.0 * p * q, a.grad * (1.0 - 2.0 * q) + gq * (1.0 - 2.0 * p)),
+        _ => (1.0 - p, -a.grad),
+    };
+    Moments { mean: r, grad, var: r * (1.0 - r) }
 }
 
 /// Probability moments of the condition of `ifgreater` & co.
@@ -577,6 +612,10 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                     }
                 });
             }
+        }
+        MathOp::And | MathOp::Or | MathOp::Xor | MathOp::Not => {
+            out.ch[0] = logic(*op, &ins[0].ch[0], ins.get(1).map(|i| &i.ch[0]));
+            return out;
         }
         MathOp::IfGreater | MathOp::IfGreaterEq | MathOp::IfEqual => {
             let integral = ins[0].ty != ValueType::Float;

@@ -341,6 +341,9 @@ pub(crate) mod types {
     pub fn color(t: ValueType) -> bool {
         matches!(t, Color3 | Color4)
     }
+    pub fn boolean(t: ValueType) -> bool {
+        t == Boolean
+    }
 }
 
 #[cfg(test)]
