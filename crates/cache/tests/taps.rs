@@ -27,7 +27,7 @@ fn taps_name_exactly_the_tiles_a_lookup_fills() {
         let uv = Vec2::new(rng(&mut s) * 6.0 - 3.0, rng(&mut s) * 6.0 - 3.0);
         // σ from 1e-5 to 10 uv units (below level 0 to beyond the coarsest), random anisotropy.
         let sigma = 10f32.powf(-5.0 + 6.0 * rng(&mut s));
-        let r = Mat2::from_angle(6.28 * rng(&mut s));
+        let r = Mat2::from_angle(std::f32::consts::TAU * rng(&mut s));
         let minor = sigma * (0.1 + 0.9 * rng(&mut s));
         let cov = r * Mat2::from_diagonal(Vec2::new(sigma * sigma, minor * minor)) * r.transpose();
         let t = trilinear_taps(&desc, tile_size, uv, cov);

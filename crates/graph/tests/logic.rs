@@ -55,54 +55,24 @@ fn logic_nodes_match_truth_tables_and_supersampling() {
         for (cx, cy, sx, sy) in [(0.48f32, 0.33f32, 0.05f32, 0.04f32), (0.55, 0.25, 0.2, 0.1), (0.5, 0.3, 0.01, 0.3)] {
             let fp = Footprint::new(Vec2::new(cx, cy), Mat2::from_diagonal(Vec2::new(sx * sx, sy * sy)));
             let got = g.eval_output(out, &fp, &mut scratch).ch[0].mean as f64;
-            // Brute force: a 64×64 grid of Gaussian quantiles per axis.
-            let n = 64;
-            let q: Vec<f64> = (0..n).map(|i| inv_normal((i as f64 + 0.5) / n as f64)).collect();
-            let mut hits = 0.0;
-            for &a in &q {
-                for &b in &q {
+            // Brute force: a 201×201 grid over ±5σ per axis with Gaussian weights.
+            let n = 201;
+            let t: Vec<(f64, f64)> = (0..n)
+                .map(|i| {
+                    let x = -5.0 + 10.0 * i as f64 / (n - 1) as f64;
+                    (x, (-0.5 * x * x).exp())
+                })
+                .collect();
+            let (mut hits, mut total) = (0.0, 0.0);
+            for &(a, wa) in &t {
+                for &(b, wb) in &t {
                     let (u, v) = (cx as f64 + sx as f64 * a, cy as f64 + sy as f64 * b);
-                    hits += f64::from(u8::from(truth(op, u > 0.5, v > 0.3)));
+                    hits += wa * wb * f64::from(u8::from(truth(op, u > 0.5, v > 0.3)));
+                    total += wa * wb;
                 }
             }
-            let want = hits / (n * n) as f64;
+            let want = hits / total;
             assert!((got - want).abs() < 0.02, "{op} at {cx},{cy} σ {sx},{sy}: {got} vs {want}");
         }
-    }
-}
-
-/// The standard normal quantile (Acklam's rational approximation, |error| < 1.2e-9).
-fn inv_normal(p: f64) -> f64 {
-    let a = [
-        -3.969683028665376e1,
-        2.209460984245205e2,
-        -2.759285104469687e2,
-        1.383577518672690e2,
-        -3.066479806614716e1,
-        2.506628277459239,
-    ];
-    let b =
-        [-5.447609879822406e1, 1.615858368580409e2, -1.556989798598866e2, 6.680131188771972e1, -1.328068155288572e1];
-    let c = [
-        -7.784894002430293e-3,
-        -3.223964580411365e-1,
-        -2.400758277161838,
-        -2.549732539343734,
-        4.374664141464968,
-        2.938163982698783,
-    ];
-    let d = [7.784695709041462e-3, 3.224671290700398e-1, 2.445134137142996, 3.754408661907416];
-    let pl = 0.02425;
-    if p < pl {
-        let q = (-2.0 * p.ln()).sqrt();
-        (((((c[0] * q + c[1]) * q + c[2]) * q + c[3]) * q + c[4]) * q + c[5])
-            / ((((d[0] * q + d[1]) * q + d[2]) * q + d[3]) * q + 1.0)
-    } else if p > 1.0 - pl {
-        -inv_normal(1.0 - p)
-    } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((a[0] * r + a[1]) * r + a[2]) * r + a[3]) * r + a[4]) * r + a[5]) * q
-            / (((((b[0] * r + b[1]) * r + b[2]) * r + b[3]) * r + b[4]) * r + 1.0)
     }
 }

@@ -97,6 +97,10 @@ pub struct NodePrediction {
     pub bytes: f64,
     /// Thread-seconds in the node's evaluations.
     pub thread_s: f64,
+    /// Requests to the node by level (index 0: finer than level 0, index ℓ + 1: level ℓ), from
+    /// the renderer and from other nodes' tile fills, whether the cache or an evaluation answers
+    /// them (its own tile fills are not requests).
+    pub requests_by_level: Vec<f64>,
 }
 
 /// What the model predicts for a plan.
@@ -276,6 +280,8 @@ impl<'p> Model<'p> {
         let mut evals: Vec<Vec<Vec<f64>>> =
             p.graphs.iter().map(|g| vec![vec![0.0; self.bins]; g.nodes.len()]).collect();
         let mut lookups: Vec<Vec<f64>> = p.graphs.iter().map(|g| vec![0.0; g.nodes.len()]).collect();
+        let mut requests: Vec<Vec<Vec<f64>>> =
+            p.graphs.iter().map(|g| vec![vec![0.0; self.bins]; g.nodes.len()]).collect();
         let mut sets: Vec<Vec<TileSet>> = p.graphs.iter().map(|g| vec![TileSet::new(); g.nodes.len()]).collect();
         let mut seen = Vec::new();
         for (si, s) in self.streams.iter().enumerate() {
@@ -285,6 +291,7 @@ impl<'p> Model<'p> {
                 }
                 let g = s.graph;
                 self.walk(g, &s.outputs, b, plan, &mut seen, |n, served| {
+                    requests[g][n as usize][b] += r;
                     if served {
                         lookups[g][n as usize] += r;
                         let level = (b - 1) as u8;
@@ -316,6 +323,7 @@ impl<'p> Model<'p> {
                     evals[g][n][b] += texels;
                     let inputs = &graph.nodes[n].inputs;
                     self.walk(g, inputs, b, plan, &mut seen, |u, served| {
+                        requests[g][u as usize][b] += texels;
                         if served {
                             lookups[g][u as usize] += texels;
                             for (&s, &(v, d)) in comps {
@@ -334,6 +342,7 @@ impl<'p> Model<'p> {
             for n in 0..graph.nodes.len() {
                 let np = &mut nodes[g][n];
                 np.lookups = lookups[g][n];
+                np.requests_by_level = std::mem::take(&mut requests[g][n]);
                 np.evaluations = evals[g][n].iter().sum();
                 np.thread_s = evals[g][n].iter().zip(&self.cost[g][n]).map(|(e, c)| e * c).sum::<f64>() * 1e-9;
                 out.evaluations += np.evaluations;

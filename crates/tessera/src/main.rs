@@ -373,7 +373,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             let stem = outputs[0].with_extension("");
             PathBuf::from(format!("{}.report", stem.display()))
         });
-        select_cmd::write_report(&dir, &a.profile, &md, &rows)?;
+        select_cmd::write_report(&dir, &a.profile, &md, (&a.result.prediction, &a.result.plan), &rows)?;
         write_atomic(&dir.join("profile.json"), a.profile.to_json().as_bytes())?;
         write_atomic(&dir.join("plan.json"), a.file.to_json().as_bytes())?;
         if !args.quiet {

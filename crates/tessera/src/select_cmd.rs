@@ -280,13 +280,15 @@ pub fn run_profile(args: ProfileArgs) -> Result<()> {
     write_atomic(&args.out, profile.to_json().as_bytes())?;
     if !args.quiet {
         eprintln!(
-            "profiled {} samples ({:.0} % of the pixels at {} spp) in {:.2} s: {} streams, texture work {:.2} thread-s; wrote {}",
+            "profiled {} samples ({:.0} % of the pixels at {} spp) in {:.2} s: {} streams, texture work {:.2} thread-s, profiling tap {:.3} thread-s ({:.1} % of it); wrote {}",
             profile.render.samples,
             args.pixel_fraction * 100.0,
             args.spp,
             profile.render.wall_s,
             profile.streams.len(),
             profile.render.texture_thread_s,
+            profile.render.tap_thread_s,
+            100.0 * profile.render.tap_thread_s / profile.render.texture_thread_s.max(1e-12),
             args.out.display()
         );
     }
@@ -394,7 +396,7 @@ pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
     }
     println!("{md}");
     if let Some(dir) = &args.report {
-        write_report(dir, &profile, &md, &rows)?;
+        write_report(dir, &profile, &md, (&r.prediction, &r.plan), &rows)?;
         eprintln!("wrote {}", dir.display());
     }
     Ok(())
@@ -428,11 +430,19 @@ pub fn node_table(profile: &Profile, p: &Prediction, plan: &PlanSpec) -> String 
     s
 }
 
-/// Writes `table.md`, `levels.svg` and (with measurements) `predicted_vs_measured.svg`.
-pub fn write_report(dir: &Path, profile: &Profile, md: &str, rows: &[(String, Prediction, Measured)]) -> Result<()> {
+/// Writes `table.md`, `levels.svg` (requests by level per stream), `node_levels.svg` (per node
+/// under the plan) and, with measurements, `predicted_vs_measured.svg`.
+pub fn write_report(
+    dir: &Path,
+    profile: &Profile,
+    md: &str,
+    planned: (&Prediction, &PlanSpec),
+    rows: &[(String, Prediction, Measured)],
+) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     write_atomic(&dir.join("table.md"), md.as_bytes())?;
     write_atomic(&dir.join("levels.svg"), levels_svg(profile).as_bytes())?;
+    write_atomic(&dir.join("node_levels.svg"), node_levels_svg(profile, planned.0, planned.1).as_bytes())?;
     if !rows.is_empty() {
         write_atomic(&dir.join("predicted_vs_measured.svg"), scatter_svg(rows).as_bytes())?;
     }
@@ -452,6 +462,34 @@ pub fn levels_svg(profile: &Profile) -> String {
             crate::svg::histogram(&title, &bins, range, "#4a7fb5")
         })
         .collect();
+    side_by_side(&charts, 200.0, 104.0)
+}
+
+/// Per node with requests under the plan: its predicted requests by footprint level (from the
+/// renderer and from cached consumers' tile fills), coloured by whether the node is cached.
+pub fn node_levels_svg(profile: &Profile, p: &Prediction, plan: &PlanSpec) -> String {
+    let range = (-1i64, i64::from(profile.cache.max_level));
+    let mut charts = Vec::new();
+    for (g, graph) in profile.graphs.iter().enumerate() {
+        for (n, node) in graph.nodes.iter().enumerate() {
+            let np = &p.nodes[g][n];
+            if np.requests_by_level.iter().all(|&r| r <= 0.0) {
+                continue;
+            }
+            let bins: Vec<(i64, f64)> = np
+                .requests_by_level
+                .iter()
+                .enumerate()
+                .map(|(b, &r)| (b as i64 - 1, r))
+                .filter(|b| b.1 > 0.0)
+                .collect();
+            let (title, color) = match plan.cached[g][n] {
+                Some(min) => (format!("{} (cached, levels ≥ {min})", node.name), "#c0504d"),
+                None => (node.name.clone(), "#4a7fb5"),
+            };
+            charts.push(crate::svg::histogram(&title, &bins, range, color));
+        }
+    }
     side_by_side(&charts, 200.0, 104.0)
 }
 

@@ -60,7 +60,7 @@ fn profile_plan_analyze_and_render_with_the_plan() {
     ok(&o);
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("Predicted against measured") && text.contains("| none |"), "{text}");
-    for f in ["table.md", "levels.svg", "predicted_vs_measured.svg"] {
+    for f in ["table.md", "levels.svg", "node_levels.svg", "predicted_vs_measured.svg"] {
         assert!(dir.join("rep").join(f).is_file(), "{f} missing");
     }
 }
@@ -91,7 +91,7 @@ fn auto_strategy_profiles_plans_renders_and_reports() {
     assert_eq!(s["plan"]["strategy"], "auto");
     assert!(s["plan"]["profile_s"].as_f64().unwrap() > 0.0);
     assert!(s["plan"]["predicted"]["render_s"].as_f64().unwrap() > 0.0);
-    for f in ["profile.json", "plan.json", "table.md", "levels.svg", "predicted_vs_measured.svg"] {
+    for f in ["profile.json", "plan.json", "table.md", "levels.svg", "node_levels.svg", "predicted_vs_measured.svg"] {
         assert!(dir.join("a.report").join(f).is_file(), "{f} missing");
     }
 }
