@@ -57,7 +57,11 @@ impl Image {
             let p = self.pixels[pos.y() * w + pos.x()];
             (p.x, p.y, p.z)
         });
-        let image = exr::image::Image::from_channels((self.width as usize, self.height as usize), channels);
+        // Increasing line order: blocks compressed in parallel are still written in order, so a
+        // file's bytes do not depend on thread timing.
+        let encoding = Encoding { line_order: LineOrder::Increasing, ..Encoding::default() };
+        let image =
+            exr::image::Image::from_encoded_channels((self.width as usize, self.height as usize), encoding, channels);
         image.write().to_file(tmp).map_err(|e| crate::error::Error::in_file(tmp, format!("cannot write EXR: {e}")))
     }
 

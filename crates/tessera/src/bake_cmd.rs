@@ -123,7 +123,9 @@ fn encode_exr(img: &BakedImage) -> Result<Vec<u8>> {
     let layer = Layer::new(
         (img.width as usize, img.height as usize),
         LayerAttributes::default(),
-        Encoding::FAST_LOSSLESS,
+        // Increasing line order: the blocks are then written in order even when compressed in
+        // parallel, so the file's bytes do not depend on thread timing.
+        Encoding { line_order: LineOrder::Increasing, ..Encoding::FAST_LOSSLESS },
         AnyChannels::sort(channels.into()),
     );
     let mut buf = Cursor::new(Vec::new());

@@ -1,0 +1,31 @@
+//! BVH traversal alone: closest-hit and occlusion queries of every camera ray of each reference
+//! scene (256 × 256 rays per iteration), reported as rays per second.
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use glam::Vec2;
+use std::path::PathBuf;
+
+fn bvh(c: &mut Criterion) {
+    let refs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/refs/scenes");
+    let mut group = c.benchmark_group("bvh");
+    group.sample_size(20);
+    for name in ["cbox", "textured_mesh"] {
+        let scene = render::loader::load_file(&refs.join(format!("{name}.xml")), &[]).expect("scene loads");
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        let rays: Vec<_> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
+            .map(|p| scene.camera.generate_ray(p).ray)
+            .collect();
+        group.throughput(Throughput::Elements(rays.len() as u64));
+        group.bench_function(format!("{name}/closest"), |b| {
+            b.iter(|| rays.iter().filter(|r| scene.accel.intersect(&scene.shapes, r).is_some()).count())
+        });
+        group.bench_function(format!("{name}/occluded"), |b| {
+            b.iter(|| rays.iter().filter(|r| scene.accel.occluded(&scene.shapes, r)).count())
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bvh);
+criterion_main!(benches);
