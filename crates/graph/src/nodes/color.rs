@@ -13,7 +13,6 @@ use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::graph::Source;
 use crate::moments::{add_scaled, mix, mul, nary};
 use crate::value::{Filtered, Moments, ValueType};
-use glam::Vec2;
 
 pub(crate) const CATEGORIES: &[&str] = &["luminance", "saturate", "contrast", "rgbtohsv", "hsvtorgb", "hsvadjust"];
 
@@ -156,11 +155,6 @@ pub(crate) fn eval(op: &ColorOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
                     hsv_to_rgb([hsv[0] + p[3], hsv[1] * p[4], hsv[2] * p[5]])[k]
                 });
             }
-        }
-    }
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
         }
     }
     out

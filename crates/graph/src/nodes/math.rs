@@ -639,10 +639,5 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
             }
         }
     }
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
-        }
-    }
     out
 }

@@ -240,8 +240,10 @@ pub(crate) struct Ctx<'a> {
 }
 
 /// Evaluates one node filtered, from its (already filtered) inputs.
+/// Evaluates `op`; at points (unfiltered evaluation) the result carries no uv gradient, whatever
+/// the node family computed on the way.
 pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    match op {
+    let mut out = match op {
         Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
         Op::Noise(n) => noise::eval(n, ty, ins, ctx),
         Op::Noise3d(n) => noise3d::eval(n, ty, ins, ctx),
@@ -252,7 +254,13 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Color(c) => color::eval(c, ty, ins, ctx),
         Op::Image(t) => image::eval(t, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
+    };
+    if ctx.point {
+        for c in out.ch.iter_mut() {
+            c.grad = glam::Vec2::ZERO;
+        }
     }
+    out
 }
 
 /// Whether the operation itself reads the shading point's geometry beyond uv (position, normal,

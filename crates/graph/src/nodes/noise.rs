@@ -857,19 +857,13 @@ fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
 }
 
 pub(crate) fn eval(op: &NoiseOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    let mut out = match op {
+    match op {
         NoiseOp::Noise2d => noise2d(ty, ins, ctx),
         NoiseOp::Fractal2d => fractal2d(ty, ins, ctx),
         NoiseOp::Cellnoise2d => cellnoise2d(ty, ins, ctx),
         NoiseOp::Worley2d(st) => worley2d(st, ty, ins, ctx),
         NoiseOp::Unified2d(st) => unified2d(st, ty, ins, ctx),
-    };
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
-        }
     }
-    out
 }
 
 #[cfg(test)]

@@ -730,19 +730,13 @@ fn unified3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
 }
 
 pub(crate) fn eval(op: &Noise3dOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    let mut out = match op {
+    match op {
         Noise3dOp::Noise3d => noise3d(ty, ins, ctx),
         Noise3dOp::Fractal3d => fractal3d(ty, ins, ctx),
         Noise3dOp::Cellnoise3d => cellnoise3d(ty, ins, ctx),
         Noise3dOp::Worley3d(st) => worley3d(st, ty, ins, ctx),
         Noise3dOp::Unified3d(st) => unified3d(st, ty, ins, ctx),
-    };
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
-        }
     }
-    out
 }
 
 #[cfg(test)]

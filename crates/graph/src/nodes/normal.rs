@@ -12,7 +12,7 @@ use super::{inp, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::graph::Source;
 use crate::moments;
 use crate::value::{Filtered, Moments, ValueType};
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 
 pub(crate) const CATEGORIES: &[&str] = &["normalmap", "heighttonormal"];
 
@@ -70,7 +70,7 @@ pub fn heighttonormal_point(dh: [f64; 2], k: f64) -> [f64; 3] {
     [n.x * 0.5 + 0.5, n.y * 0.5 + 0.5, n.z * 0.5 + 0.5]
 }
 
-pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], _: &mut Ctx) -> Filtered {
     if let NormalOp::HeightToNormal = op {
         let gh = ins[0].ch[0].grad.as_dvec2();
         let t = &ins[2];
@@ -101,11 +101,6 @@ pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
     let mut out = Filtered::zero(ty);
     for k in 0..3 {
         out.ch[k] = moments::nary(&xs, |p| normalmap_point(p)[k]);
-    }
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
-        }
     }
     out
 }

@@ -28,7 +28,6 @@ use crate::gaussian::{self, poly, Piece};
 use crate::graph::Source;
 use crate::moments::{self, affine, chain, mix};
 use crate::value::{Filtered, Moments, ValueType};
-use glam::Vec2;
 
 pub(crate) const CATEGORIES: &[&str] =
     &["checkerboard", "ramplr", "ramptb", "ramp4", "ramp", "splitlr", "splittb", "randomfloat", "randomcolor"];
@@ -609,11 +608,6 @@ pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
     };
     for c in out.ch.iter_mut().skip(n) {
         *c = Moments::default();
-    }
-    if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = Vec2::ZERO;
-        }
     }
     out
 }
