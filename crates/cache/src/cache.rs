@@ -165,6 +165,8 @@ pub struct TileRef {
 /// The tiles a trilinear lookup reads (see [`trilinear_taps`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrilinearTaps {
+    /// The footprint's level by [`level_for`], before clamping (negative: finer than level 0).
+    pub level: f32,
     /// The continuous level, clamped to the texture's levels.
     pub lod: f32,
     /// The tile of the finer level `⌊lod⌋`.
@@ -179,7 +181,8 @@ pub struct TrilinearTaps {
 /// the lookup, for profilers and models that predict which tiles a render touches.
 pub fn trilinear_taps(desc: &TextureDesc, tile_size: u32, uv: Vec2, cov_uv: Mat2) -> TrilinearTaps {
     let hi = desc.max_level;
-    let lod = level_for(cov_uv, desc.texels_per_uv).clamp(0.0, f32::from(hi));
+    let level = level_for(cov_uv, desc.texels_per_uv);
+    let lod = level.clamp(0.0, f32::from(hi));
     let l0 = lod as u8;
     let tile_at = |level: u8| {
         let ((i0, _), (j0, _)) = tap_texel(tile::level_density(desc, level), uv);
@@ -187,7 +190,7 @@ pub fn trilinear_taps(desc: &TextureDesc, tile_size: u32, uv: Vec2, cov_uv: Mat2
         TileRef { level, x: x as i32, y: y as i32 }
     };
     let upper = (lod - f32::from(l0) > 0.0 && l0 < hi).then(|| tile_at(l0 + 1));
-    TrilinearTaps { lod, lower: tile_at(l0), upper }
+    TrilinearTaps { level, lod, lower: tile_at(l0), upper }
 }
 
 /// Bytes one tile of `desc` is charged against the budget with tiles of `tile_size` texels

@@ -88,7 +88,8 @@ pub struct EvalScratch {
 pub struct BinnedTimings {
     /// Bins per node.
     pub bins: usize,
-    /// One evaluation in this many of each node is timed while binned timing is on.
+    /// One evaluation in this many of each node is timed ([`TIMING_PERIOD`] unless binned
+    /// timing set another).
     pub period: u64,
     /// The bin the next evaluations are charged to.
     pub current: usize,
@@ -140,7 +141,7 @@ impl EvalScratch {
             lookups: vec![0; n],
             timed_ns: vec![0; n],
             timed: vec![0; n],
-            binned: BinnedTimings::default(),
+            binned: BinnedTimings { period: TIMING_PERIOD, ..BinnedTimings::default() },
             work: Work::default(),
         }
     }
@@ -339,8 +340,7 @@ impl Graph {
             }
             let n_in = node.inputs.len();
             let i = id.0 as usize;
-            let period = if scratch.binned.bins > 0 { scratch.binned.period } else { TIMING_PERIOD };
-            let timed = scratch.evaluations[i].is_multiple_of(period);
+            let timed = scratch.evaluations[i].is_multiple_of(scratch.binned.period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
             let mut ctx = Ctx { fp, point, work: &mut scratch.work };
             let v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);

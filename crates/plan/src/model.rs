@@ -369,7 +369,6 @@ impl<'p> Model<'p> {
         let mut unseen = 0.0;
         for &(s, level, v, d) in &key {
             let taps = &self.streams[s as usize].levels[usize::from(level)];
-            let before = union.len();
             let mut own: HashSet<(i32, i32)> = HashSet::new();
             for &(x, y, lo, up) in &taps.tiles {
                 if pick(v, lo, up) == 0 {
@@ -387,7 +386,6 @@ impl<'p> Model<'p> {
                 unseen += (taps.predicted[usize::from(v)] - observed) * growth;
             }
             union.extend(own);
-            debug_assert!(union.len() >= before);
         }
         let c = union.len() as f64 + unseen;
         self.memo.borrow_mut().insert(key, c);

@@ -295,13 +295,18 @@ impl NodeCache {
                 }
             }
         }
-        NodeCache::build(graphs, strategy, chosen, min_level, rects, budget_bytes).map(Some)
+        let bake = match strategy {
+            Strategy::Bake(res) => Some(*res),
+            _ => None,
+        };
+        NodeCache::build(graphs, bake, chosen, min_level, rects, budget_bytes).map(Some)
     }
 
-    /// The cache for the chosen nodes (filled now for bakes).
+    /// The cache for the chosen nodes; with `bake` (texels across each uv rectangle), the baked
+    /// textures, filled before this returns.
     fn build(
         graphs: &[SceneGraph],
-        strategy: &Strategy,
+        bake: Option<u32>,
         chosen: Vec<Vec<bool>>,
         min_level: Vec<Vec<u8>>,
         rects: Vec<Vec<Option<UvRect>>>,
@@ -320,10 +325,10 @@ impl NodeCache {
                     continue;
                 }
                 let Some(ch) = channels(g.node_type(id)) else { continue };
-                let (texels_per_uv, max_level) = match (strategy, rects[gi][id.0 as usize]) {
-                    (Strategy::Bake(res), Some((lo, hi))) => {
+                let (texels_per_uv, max_level) = match (bake, rects[gi][id.0 as usize]) {
+                    (Some(res), Some((lo, hi))) => {
                         let extent = (hi - lo).max_element().max(1e-6);
-                        (*res as f32 / extent, (*res as f32).log2().ceil().clamp(0.0, cache::MAX_LEVEL as f32) as u8)
+                        (res as f32 / extent, (res as f32).log2().ceil().clamp(0.0, cache::MAX_LEVEL as f32) as u8)
                     }
                     _ => (LEVEL0_TEXELS_PER_UV, MAX_LEVEL),
                 };
@@ -332,7 +337,7 @@ impl NodeCache {
             }
             textures.push(per_node);
         }
-        let baked = matches!(strategy, Strategy::Bake(_));
+        let baked = bake.is_some();
         // Trilinear, not anisotropic probes: on the demo scenes the probes filled 8× more texels
         // (finer levels along grazing footprints) and made caching slower than evaluating;
         // trilinear blurs elongated footprints along their minor axis instead.
@@ -358,7 +363,7 @@ impl NodeCache {
             return Ok(None);
         }
         let rects = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
-        NodeCache::build(graphs, &Strategy::Plan(Default::default()), chosen, min_level, rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, None, chosen, min_level, rects, budget_bytes).map(Some)
     }
 
     /// Fills every tile of every level of the baked textures over their uv rectangles.

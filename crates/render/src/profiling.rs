@@ -100,8 +100,7 @@ impl Tap {
         let t_all = self.exact.then(Instant::now);
         let t0 = timed.then(Instant::now);
         let taps = cache::trilinear_taps(&self.desc, self.tile_size, fp.uv, fp.cov);
-        let level = cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV);
-        let b = if level < 0.0 { 0 } else { (taps.lod as usize + 1).min(BINS - 1) };
+        let b = if taps.level < 0.0 { 0 } else { (taps.lod as usize + 1).min(BINS - 1) };
         let st = &mut self.streams[stream as usize];
         st.requests[b] += 1;
         if b > 0 && !self.exact {

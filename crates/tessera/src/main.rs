@@ -340,44 +340,14 @@ fn run_render(args: RenderArgs) -> Result<()> {
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     if let Some(a) = &auto {
-        let measured = select_cmd::Measured {
-            evaluations: out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64,
-            render_s,
-            ..node_cache.as_ref().map_or_else(select_cmd::Measured::default, |nc| {
-                let st = nc.stats();
-                let t = st.total();
-                select_cmd::Measured {
-                    lookups: st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64,
-                    tiles_filled: t.fills as f64,
-                    texels_filled: t.texels_filled as f64,
-                    peak_bytes: st.peak_bytes as f64,
-                    ..Default::default()
-                }
-            })
-        };
-        let rows = vec![("auto".to_string(), a.result.prediction.clone(), measured)];
-        let model = plan::Model::new(&a.profile, a.target)?;
-        let md = format!(
-            "# --strategy auto\n\nProfile: {} samples in {:.2} s; plan: {} ({} candidates, {} plans predicted) in {:.3} s.\n\n## Predicted per strategy\n\n{}\n## Per node (plan)\n\n{}\n## Predicted against measured\n\n{}",
-            a.profile.render.samples,
-            a.profile_s,
-            a.result.method,
-            a.result.candidates,
-            a.result.plans_evaluated,
-            a.plan_s,
-            select_cmd::prediction_table(&model, &select_cmd::standard_rows(&a.profile, &a.result.plan)),
-            select_cmd::node_table(&a.profile, &a.result.prediction, &a.result.plan),
-            select_cmd::comparison_table(&rows)
-        );
         let dir = args.report.clone().unwrap_or_else(|| {
             let stem = outputs[0].with_extension("");
             PathBuf::from(format!("{}.report", stem.display()))
         });
-        select_cmd::write_report(&dir, &a.profile, &md, (&a.result.prediction, &a.result.plan), &rows)?;
-        write_atomic(&dir.join("profile.json"), a.profile.to_json().as_bytes())?;
-        write_atomic(&dir.join("plan.json"), a.file.to_json().as_bytes())?;
+        let measured = select_cmd::Measured::of_render(&out.graph_stats, node_cache.as_ref(), render_s);
+        let comparison = a.write_report(&dir, measured)?;
         if !args.quiet {
-            eprintln!("{}", select_cmd::comparison_table(&rows));
+            eprintln!("{comparison}");
             eprintln!("report: {}", dir.display());
         }
     }

@@ -152,6 +152,25 @@ pub struct Measured {
 }
 
 impl Measured {
+    /// From a finished render: its graph statistics and cache.
+    pub fn of_render(
+        graph_stats: &[graph::EvalStats],
+        cache: Option<&render::caching::NodeCache>,
+        render_s: f64,
+    ) -> Measured {
+        let evaluations = graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64;
+        let mut m = Measured { evaluations, render_s, ..Measured::default() };
+        if let Some(nc) = cache {
+            let st = nc.stats();
+            let t = st.total();
+            m.lookups = st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64;
+            m.tiles_filled = t.fills as f64;
+            m.texels_filled = t.texels_filled as f64;
+            m.peak_bytes = st.peak_bytes as f64;
+        }
+        m
+    }
+
     /// From a `tessera.stats/1` document.
     pub fn from_stats(v: &serde_json::Value) -> Measured {
         let f = |p: &str| v.pointer(p).and_then(|x| x.as_f64()).unwrap_or(0.0);
@@ -566,6 +585,29 @@ pub fn auto_plan(
 }
 
 impl AutoPlan {
+    /// Writes the run's report folder (tables, plots, `profile.json`, `plan.json`) with the
+    /// measured render; returns the predicted-against-measured table.
+    pub fn write_report(&self, dir: &Path, measured: Measured) -> Result<String> {
+        let rows = vec![("auto".to_string(), self.result.prediction.clone(), measured)];
+        let model = Model::new(&self.profile, self.target)?;
+        let comparison = comparison_table(&rows);
+        let md = format!(
+            "# --strategy auto\n\nProfile: {} samples in {:.2} s; plan: {} ({} candidates, {} plans predicted) in {:.3} s.\n\n## Predicted per strategy\n\n{}\n## Per node (plan)\n\n{}\n## Predicted against measured\n\n{comparison}",
+            self.profile.render.samples,
+            self.profile_s,
+            self.result.method,
+            self.result.candidates,
+            self.result.plans_evaluated,
+            self.plan_s,
+            prediction_table(&model, &standard_rows(&self.profile, &self.result.plan)),
+            node_table(&self.profile, &self.result.prediction, &self.result.plan),
+        );
+        write_report(dir, &self.profile, &md, (&self.result.prediction, &self.result.plan), &rows)?;
+        write_atomic(&dir.join("profile.json"), self.profile.to_json().as_bytes())?;
+        write_atomic(&dir.join("plan.json"), self.file.to_json().as_bytes())?;
+        Ok(comparison)
+    }
+
     /// The `"plan"` object of the stats JSON.
     pub fn stats_json(&self) -> serde_json::Value {
         json!({
