@@ -19,7 +19,7 @@
 //!
 //! | family (file) | nodes | filtering |
 //! |---|---|---|
-//! | geometry (`nodes/geometry.rs`) | texcoord, position, normal, tangent, bitangent, geompropvalue, constant, place2d, rotate2d, rotate3d, transformpoint, transformvector, transformnormal, dot | exact (linear): `position` spreads by the surface Jacobian (`J Σ Jᵀ`); object, model and world space are one in tessera; transformnormal by cubature (it normalises) |
+//! | geometry (`nodes/geometry.rs`) | texcoord, position, normal, tangent, bitangent, geompropvalue, constant, place2d, rotate2d, rotate3d, transformpoint, transformvector, transformnormal, transformmatrix, dot | exact (linear): `position` spreads by the surface Jacobian (`J Σ Jᵀ`); object, model and world space are one in tessera; transformnormal by cubature (it normalises); matrices are uniforms folded at load ([`matrix`]) |
 //! | noise (`nodes/noise.rs`) | noise2d, fractal2d, cellnoise2d, worleynoise2d, unifiednoise2d | Perlin: exact Gaussian convolution of the separable corner kernels up to σ = 0.25 lattice units, Gaussian damping beyond, octaves past the band limit dropped (never evaluated); cell noise: exact cell masses; Worley: 3×3 Gauss–Hermite then the global mean; unifiednoise2d: its type's node (fractal3d as an exactly filtered z-slice of 3D Perlin noise), clamped-ramp moments for the output clamp |
 //! | 3D noise (`nodes/noise3d.rs`) | noise3d, fractal3d, cellnoise3d, worleynoise3d, unifiednoise3d | as their 2D counterparts over the position input's per-axis spreads (the surface footprint's 3D marginals): Perlin exact up to σ = 0.25 lattice units per axis, damped beyond, octaves past the band limit dropped; cell noise exact cell masses; Worley Gauss–Hermite then the global mean (of the plane, for a footprint flat along a lattice axis) |
 //! | patterns (`nodes/pattern.rs`) | checkerboard, ramplr, ramptb, ramp4, ramp, splitlr, splittb, randomfloat, randomcolor | closed forms: square-wave expectations (erf sums / damped Fourier series), clamped-ramp moments, piecewise-polynomial moments (`ramp`), step probabilities Φ |
@@ -66,6 +66,7 @@ pub mod error;
 pub mod eval;
 pub mod gaussian;
 pub mod graph;
+pub mod matrix;
 pub mod moments;
 pub mod mtlx;
 pub mod nodes;
@@ -75,6 +76,7 @@ pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orie
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 pub use eval::{BinnedTimings, EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, Work};
 pub use graph::{GeomProp, Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
+pub use matrix::Matrix;
 pub use mtlx::{parse_value, Document, LoadOptions, MaterialBinding, MaterialSource};
 pub use nodes::noise::{fractal_point, perlin_float, worley_point};
 pub use nodes::noise3d::{fractal3_point, perlin3, worley3_point};

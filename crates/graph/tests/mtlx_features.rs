@@ -223,6 +223,34 @@ fn versions_1_36_to_1_38_are_upgraded() {
     // 1.38's atan2(in1, in2) is atan2(iny = in1, inx = in2).
     assert!(close(&eval(&doc138, "g/t", uv), &[1.0f32.atan2(2.0)], 1e-6));
     assert!(close(&eval(&doc138, "g/sw", uv), &[0.625, 0.25, 0.0], 1e-6));
+
+    // Normal maps: object space becomes normalize(2·in − 1); a tangent-space map's unbound frame
+    // literals give way to the geometric frame (here the flat quad's: T = +x, B = +y, N = +z).
+    let nm = doc(
+        "1.38",
+        r#"  <nodegraph name="g">
+    <normalmap name="obj" type="vector3">
+      <input name="in" type="vector3" value="0.9, 0.3, 0.6" />
+      <input name="space" type="string" value="object" />
+    </normalmap>
+    <normalmap name="tan" type="vector3">
+      <input name="in" type="vector3" value="0.9, 0.3, 0.6" />
+      <input name="space" type="string" value="tangent" />
+      <input name="tangent" type="vector3" value="0, 1, 0" />
+      <input name="bitangent" type="vector3" value="1, 0, 0" />
+    </normalmap>
+    <output name="obj" type="vector3" nodename="obj" />
+    <output name="tan" type="vector3" nodename="tan" />
+  </nodegraph>"#,
+    );
+    let p = write(&d, "normalmap138.mtlx", &nm);
+    let docnm = Document::load(&p).unwrap();
+    let v = [0.8f32, -0.4, 0.2];
+    let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    let want: Vec<f32> = v.iter().map(|x| x / len).collect();
+    assert!(close(&eval(&docnm, "g/obj", uv), &want, 1e-5), "{:?}", eval(&docnm, "g/obj", uv));
+    // Same components: the swapped literal tangent and bitangent were dropped.
+    assert!(close(&eval(&docnm, "g/tan", uv), &want, 1e-5), "{:?}", eval(&docnm, "g/tan", uv));
 }
 
 #[test]
@@ -520,4 +548,179 @@ fn default_geometric_properties() {
     // The baker's quad: position (2u − 1, 2v − 1, 0).
     assert!(close(&eval(&doc, "g/p", uv), &[-0.5, 0.5, 0.0], 1e-6));
     assert!(close(&eval(&doc, "g/t", uv), &[0.25, 0.75], 1e-7));
+}
+
+/// `v · M` for a row-major matrix written as MaterialX writes it, computed here independently.
+fn row_times(v: &[f64], m: &[f64], n: usize) -> Vec<f64> {
+    (0..n).map(|k| (0..n).map(|j| v[j] * m[j * n + k]).sum()).collect()
+}
+
+#[test]
+fn matrices_fold_at_load_and_transform_vectors() {
+    let d = dir("matrix");
+    // A general 3×3 and 4×4 (not symmetric, not orthogonal), their inverses, products and rows.
+    let m3 = [2.0, 0.5, -1.0, 0.25, 1.5, 0.75, -0.5, 1.0, 3.0];
+    let m4 = [1.5, 0.2, 0.0, 0.0, -0.3, 0.8, 0.1, 0.0, 0.0, 0.4, 2.0, 0.0, 0.7, -0.2, 0.3, 1.0];
+    let s3 = m3.map(|x: f64| x.to_string()).join(", ");
+    let s4 = m4.map(|x: f64| x.to_string()).join(", ");
+    let p = write(
+        &d,
+        "matrix.mtlx",
+        &doc(
+            "1.39",
+            &format!(
+                r#"  <nodegraph name="g">
+    <texcoord name="uv" type="vector2"/>
+    <transformmatrix name="t2" type="vector2">
+      <input name="in" type="vector2" nodename="uv"/>
+      <input name="mat" type="matrix33" value="{s3}"/>
+    </transformmatrix>
+    <position name="p" type="vector3"/>
+    <transformmatrix name="t3" type="vector3">
+      <input name="in" type="vector3" nodename="p"/>
+      <input name="mat" type="matrix44" value="{s4}"/>
+    </transformmatrix>
+    <invertmatrix name="inv" type="matrix44"><input name="in" type="matrix44" value="{s4}"/></invertmatrix>
+    <transformmatrix name="back" type="vector3">
+      <input name="in" type="vector3" nodename="t3"/>
+      <input name="mat" type="matrix44" nodename="inv"/>
+    </transformmatrix>
+    <transpose name="tr" type="matrix33"><input name="in" type="matrix33" value="{s3}"/></transpose>
+    <multiply name="mm" type="matrix33">
+      <input name="in1" type="matrix33" nodename="tr"/>
+      <input name="in2" type="matrix33" value="{s3}"/>
+    </multiply>
+    <extract name="row2" type="vector3">
+      <input name="in" type="matrix33" nodename="mm"/>
+      <input name="index" type="integer" value="2"/>
+    </extract>
+    <determinant name="det" type="float"><input name="in" type="matrix33" value="{s3}"/></determinant>
+    <creatematrix name="cm" type="matrix44">
+      <input name="in1" type="vector3" value="1, 0, 0"/>
+      <input name="in2" type="vector3" value="0, 2, 0"/>
+      <input name="in3" type="vector3" value="0, 0, 4"/>
+      <input name="in4" type="vector3" value="0.5, 0.25, 0.125"/>
+    </creatematrix>
+    <transformmatrix name="moved" type="vector3">
+      <input name="in" type="vector3" value="1, 1, 1"/>
+      <input name="mat" type="matrix44" nodename="cm"/>
+    </transformmatrix>
+    <output name="t2" type="vector2" nodename="t2"/>
+    <output name="t3" type="vector3" nodename="t3"/>
+    <output name="back" type="vector3" nodename="back"/>
+    <output name="row2" type="vector3" nodename="row2"/>
+    <output name="det" type="float" nodename="det"/>
+    <output name="moved" type="vector3" nodename="moved"/>
+  </nodegraph>"#
+            ),
+        ),
+    );
+    let doc = Document::load(&p).unwrap();
+    let uv = Vec2::new(0.3, 0.8);
+    // vector2 with a matrix33: (u, v, 1) · M.
+    let want = row_times(&[0.3, 0.8, 1.0], &m3, 3);
+    assert!(close(&eval(&doc, "g/t2", uv), &[want[0] as f32, want[1] as f32], 1e-5));
+    // vector3 with a matrix44: (P, 1) · M on the baking quad's P = (2u − 1, 2v − 1, 0).
+    let pos = [2.0 * 0.3 - 1.0, 2.0 * 0.8 - 1.0, 0.0, 1.0];
+    let want = row_times(&pos, &m4, 4);
+    assert!(close(&eval(&doc, "g/t3", uv), &[want[0] as f32, want[1] as f32, want[2] as f32], 1e-5));
+    // The inverse undoes it (the matrix is affine: its last column is (0, 0, 0, 1)).
+    assert!(close(&eval(&doc, "g/back", uv), &[pos[0] as f32, pos[1] as f32, pos[2] as f32], 1e-5));
+    // Row 2 of Mᵀ·M is column 2 of M dotted with each column of M.
+    let col = |c: usize| [m3[c], m3[3 + c], m3[6 + c]];
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let want: Vec<f32> = (0..3).map(|c| dot(col(2), col(c)) as f32).collect();
+    assert!(close(&eval(&doc, "g/row2", uv), &want, 1e-5), "{:?} vs {want:?}", eval(&doc, "g/row2", uv));
+    // Rule of Sarrus.
+    let det = m3[0] * (m3[4] * m3[8] - m3[5] * m3[7]) - m3[1] * (m3[3] * m3[8] - m3[5] * m3[6])
+        + m3[2] * (m3[3] * m3[7] - m3[4] * m3[6]);
+    assert!(close(&eval(&doc, "g/det", uv), &[det as f32], 1e-5));
+    // creatematrix of vector3 rows: a scale by (1, 2, 4) and a translation in the last row.
+    assert!(close(&eval(&doc, "g/moved", uv), &[1.5, 2.25, 4.125], 1e-6));
+    // No matrix node is left in the graph: they were folded.
+    let g = doc.graph();
+    assert!(g.node_ids().all(|id| !["invertmatrix", "transpose", "creatematrix"].contains(&g.node_category(id))));
+
+    // Filtered: a linear map of the footprint, so its variance is exactly J Σ Jᵀ per channel.
+    let out = g.output_id("g/t2").unwrap();
+    let cov = glam::Mat2::from_cols(Vec2::new(4e-4, 1e-4), Vec2::new(1e-4, 9e-4));
+    let mut scratch = EvalScratch::new(g);
+    let f = g.eval_output(out, &Footprint::new(uv, cov), &mut scratch);
+    for k in 0..2 {
+        let j = Vec2::new(m3[k] as f32, m3[3 + k] as f32);
+        let want = j.dot(cov * j);
+        assert!((f.ch[k].var - want).abs() < 1e-6 * want.max(1e-3), "channel {k}: {} vs {want}", f.ch[k].var);
+    }
+}
+
+#[test]
+fn bad_matrices_are_clear_errors() {
+    let d = dir("badmatrix");
+    let graph = |body: &str| doc("1.39", &format!("  <nodegraph name=\"g\">\n{body}\n  </nodegraph>"));
+    // A singular matrix cannot be inverted.
+    let p = write(
+        &d,
+        "singular.mtlx",
+        &graph(
+            r#"    <invertmatrix name="inv" type="matrix33"><input name="in" type="matrix33" value="1,2,3, 2,4,6, 0,0,1"/></invertmatrix>
+    <transformmatrix name="t" type="vector3"><input name="mat" type="matrix33" nodename="inv"/></transformmatrix>
+    <output name="out" type="vector3" nodename="t"/>"#,
+        ),
+    );
+    let e = expect_error(&p, line_of(&p, "<invertmatrix"));
+    assert!(e.to_string().contains("singular"), "{e}");
+    // The wrong number of entries.
+    let p = write(
+        &d,
+        "short.mtlx",
+        &graph(
+            r#"    <transformmatrix name="t" type="vector3">
+      <input name="mat" type="matrix44" value="1, 0, 0, 0, 1, 0, 0, 0, 1"/>
+    </transformmatrix>
+    <output name="out" type="vector3" nodename="t"/>"#,
+        ),
+    );
+    let e = expect_error(&p, line_of(&p, "name=\"mat\""));
+    assert!(e.to_string().contains("matrix44"), "{e}");
+    // A row index beyond the matrix.
+    let p = write(
+        &d,
+        "index.mtlx",
+        &graph(
+            r#"    <extract name="x" type="vector3">
+      <input name="in" type="matrix33" value="1,0,0, 0,1,0, 0,0,1"/>
+      <input name="index" type="integer" value="3"/>
+    </extract>
+    <output name="out" type="vector3" nodename="x"/>"#,
+        ),
+    );
+    let e = expect_error(&p, line_of(&p, "<extract"));
+    assert!(e.to_string().contains("index 3"), "{e}");
+    // A vector4 cannot be transformed by a matrix33.
+    let p = write(
+        &d,
+        "size.mtlx",
+        &graph(
+            r#"    <transformmatrix name="t" type="vector4">
+      <input name="mat" type="matrix33" value="1,0,0, 0,1,0, 0,0,1"/>
+    </transformmatrix>
+    <output name="out" type="vector4" nodename="t"/>"#,
+        ),
+    );
+    let e = expect_error(&p, line_of(&p, "<transformmatrix"));
+    assert!(e.to_string().contains("vector4"), "{e}");
+    // A matrix built from a varying vector is reported unsupported, naming the input.
+    let p = write(
+        &d,
+        "varying.mtlx",
+        &graph(
+            r#"    <position name="p" type="vector3"/>
+    <creatematrix name="cm" type="matrix33"><input name="in1" type="vector3" nodename="p"/></creatematrix>
+    <transformmatrix name="t" type="vector3"><input name="mat" type="matrix33" nodename="cm"/></transformmatrix>
+    <output name="out" type="vector3" nodename="t"/>"#,
+        ),
+    );
+    let e = expect_error(&p, line_of(&p, "name=\"in1\""));
+    let LoadErrorKind::Unsupported { items, .. } = &e.kind else { panic!("{e}") };
+    assert!(items[0].detail.contains("`in1` varies over the surface"), "{e}");
 }

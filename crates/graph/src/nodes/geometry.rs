@@ -1,6 +1,6 @@
 //! Coordinates, geometry and constants: `texcoord`, `position`, `normal`, `tangent`,
 //! `bitangent`, `geompropvalue`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
-//! `transformpoint`, `transformvector`, `transformnormal`, `dot`.
+//! `transformpoint`, `transformvector`, `transformnormal`, `transformmatrix`, `dot`.
 //!
 //! | node | inputs (default) | filtered evaluation |
 //! |---|---|---|
@@ -15,6 +15,7 @@
 //! | `rotate3d` | `in` (0,0,0), `amount` (0°), `axis` (0,1,0) | linear: exact for uniform `amount` and `axis`; cubature otherwise |
 //! | `transformpoint`, `transformvector` | `in` (0,0,0), `fromspace`, `tospace` | identity (exact) |
 //! | `transformnormal` | `in` (0,0,1), `fromspace`, `tospace` | `normalize(in)` (MaterialX normalises), by cubature |
+//! | `transformmatrix` | `in` (0), `mat` (identity; a matrix folded at load, see [`crate::matrix`]) | affine `v · M` (vector2 with a matrix33 and vector3 with a matrix44 extended by a homogeneous 1): exact |
 //! | `dot` | `in` (0) | pass-through |
 //!
 //! Spaces: tessera transforms meshes and shapes to world space at load and keeps no object
@@ -52,6 +53,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "transformpoint",
     "transformvector",
     "transformnormal",
+    "transformmatrix",
     "dot",
 ];
 
@@ -72,6 +74,13 @@ pub enum GeometryOp {
     Identity,
     /// `transformnormal`
     TransformNormal,
+    /// `transformmatrix`: `out[k] = Σⱼ in[j] · lin[j][k] + t[k]`.
+    TransformMatrix {
+        /// The linear part, `[input channel][output channel]`.
+        lin: [[f32; 4]; 4],
+        /// The translation (the homogeneous row).
+        t: [f32; 4],
+    },
     /// `constant`
     Constant,
     /// `place2d`
@@ -110,6 +119,9 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         }
         "transformpoint" | "transformvector" => (&[inp!("in", V3, Zero)], &["fromspace", "tospace"], v3),
         "transformnormal" => (&[inp!("in", V3, Triple(0.0, 0.0, 1.0))], &["fromspace", "tospace"], v3),
+        "transformmatrix" => (&[inp!("in", Out, Zero)], &["mat"], |t| {
+            matches!(t, ValueType::Vector2 | ValueType::Vector3 | ValueType::Vector4)
+        }),
         "dot" => (&[inp!("in", Out, Zero)], &[], types::numeric),
         _ => return None,
     };
@@ -188,6 +200,24 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
                      bitangent); the node gives its `default`"
                 )),
             }
+        }
+        "transformmatrix" => {
+            let dim = ty.channels();
+            let mat = params
+                .iter()
+                .find_map(|p| match p {
+                    Param::Matrix { name, value } if name == "mat" => Some(*value),
+                    _ => None,
+                })
+                .unwrap_or_else(|| crate::matrix::Matrix::identity(dim.max(3)));
+            let Some((lin, t)) = mat.affine_for(dim) else {
+                return Err(format!(
+                    "`mat` is a matrix{n}{n}, which cannot transform a {ty} (vector2 takes a matrix33, vector3 \
+                     either, vector4 a matrix44)",
+                    n = mat.n
+                ));
+            };
+            GeometryOp::TransformMatrix { lin, t }
         }
         "constant" => GeometryOp::Constant,
         "place2d" => GeometryOp::Place2d,
@@ -274,6 +304,19 @@ pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut C
         GeometryOp::Identity => ins[0],
         GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
         GeometryOp::Rotate3d => rotate3d(ins, ctx),
+        GeometryOp::TransformMatrix { lin, t } => {
+            let v = &ins[0];
+            let n = ty.channels();
+            let mut out = Filtered::zero(ty);
+            for k in 0..n {
+                let mut acc = Moments::constant(t[k]);
+                for j in 0..n {
+                    acc = add_scaled(acc, v.ch[j], lin[j][k], ctx.fp);
+                }
+                out.ch[k] = acc;
+            }
+            out
+        }
         GeometryOp::Constant | GeometryOp::Dot => ins[0],
         GeometryOp::Rotate2d => {
             let mut out = Filtered::zero(ValueType::Vector2);

@@ -45,6 +45,14 @@ pub enum Param {
         /// Its value.
         value: String,
     },
+    /// A `matrix33` / `matrix44` input, folded to its value at load (matrices are uniforms in
+    /// tessera: see [`crate::matrix`]).
+    Matrix {
+        /// Input name.
+        name: String,
+        /// Its value.
+        value: crate::matrix::Matrix,
+    },
 }
 
 /// The type rule of one input.
@@ -297,6 +305,7 @@ pub fn supported() -> Vec<&'static str> {
     ] {
         v.extend_from_slice(f);
     }
+    v.extend_from_slice(crate::matrix::FOLDED);
     v.sort_unstable();
     v
 }
@@ -359,7 +368,7 @@ mod tests {
     /// The evaluator's fixed input array holds every definition's inputs.
     #[test]
     fn every_definition_fits_the_input_array() {
-        for c in super::supported() {
+        for c in super::supported().into_iter().filter(|c| !crate::matrix::FOLDED.contains(c)) {
             let d = super::definition(c).unwrap();
             assert!(d.inputs.len() <= super::MAX_INPUTS, "{c}: {} inputs", d.inputs.len());
         }

@@ -5,6 +5,11 @@
 //! | `normalmap` (vector3) | `in` (0.5, 0.5, 1), `scale` (1; float or vector2), `normal` (0,0,1), `tangent` (1,0,0), `bitangent` (0,1,0) | `v = 2·in − 1` (`(0,0,1)` for `in = 0`), `normalize(T·v.x·scale.x + B·v.y·scale.y + N·v.z)` | per output channel, spherical cubature over the varying input channels ([`moments::nary`](crate::moments::nary)) |
 //! | `heighttonormal` (vector3) | `in` (0), `scale` (1), `texcoord` (UV0) | `normalize(−k ∂h/∂tₓ, −k ∂h/∂t_y, 1)·½ + ½`, `k = scale/16`: what MaterialX's screen-space construction (`cross` of the screen tangents `(∂t/∂s, k ∂h/∂s)`) reduces to, independent of the pixel size; `(0,0,1)` where `texcoord` is degenerate | the normal of the filtered height: `∂h/∂t` from the gradients of the filtered `in` and `texcoord` means (`∂h/∂t = J⁻ᵀ ∂h/∂uv`); its spread over the footprint is not modelled (variance 0). Evaluation keeps gradients for point footprints when this node is involved |
 //!
+//! `space` (an input MaterialX 1.39 removed): `tangent` (or absent) is the tangent-space map
+//! above; `object`, as MaterialX's upgrade of older documents rewrites it, is
+//! `normalize(2·in − 1)` (filtered by cubature), the frame inputs unused. Any other value is an
+//! error.
+//!
 //! The frame defaults to the flat tangent frame (MaterialX's are the current world-space
 //! normal, tangent and bitangent, which the renderer does not pass to graphs yet).
 
@@ -21,6 +26,8 @@ pub(crate) const CATEGORIES: &[&str] = &["normalmap", "heighttonormal"];
 pub enum NormalOp {
     /// `normalmap`
     NormalMap,
+    /// `normalmap` with `space` = `object`: `normalize(2·in − 1)`.
+    ObjectSpace,
     /// `heighttonormal`
     HeightToNormal,
 }
@@ -43,9 +50,18 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     Some(NodeDef { category, inputs, params: &["space"], types: |t| t == ValueType::Vector3, build })
 }
 
-fn build(category: &str, _: ValueType, types: &[ValueType], _: &[Source], _: &[Param]) -> Result<Op, String> {
+fn build(category: &str, _: ValueType, types: &[ValueType], _: &[Source], params: &[Param]) -> Result<Op, String> {
     if category == "heighttonormal" {
         return Ok(Op::Normal(NormalOp::HeightToNormal));
+    }
+    let space = params.iter().find_map(|p| match p {
+        Param::Str { name, value } if name == "space" => Some(value.trim()),
+        _ => None,
+    });
+    match space {
+        None | Some("") | Some("tangent") => {}
+        Some("object") => return Ok(Op::Normal(NormalOp::ObjectSpace)),
+        Some(other) => return Err(format!("`space` must be `tangent` or `object`, not `{other}`")),
     }
     if !matches!(types[1], ValueType::Float | ValueType::Vector2) {
         return Err(format!("`scale` must be float or vector2, not {}", types[1]));
@@ -61,6 +77,12 @@ pub fn normalmap_point(p: &[f64]) -> [f64; 3] {
     let (n, t, b) = (f(5), f(8), f(11));
     let r = (t * v.x * p[3] as f32 + b * v.y * p[4] as f32 + n * v.z).normalize_or_zero();
     [r.x as f64, r.y as f64, r.z as f64]
+}
+
+/// Unfiltered object-space `normalmap`: `normalize(2·in − 1)` (zero where that is zero).
+pub fn object_space_point(p: &[f64]) -> [f64; 3] {
+    let v = glam::DVec3::new(2.0 * p[0] - 1.0, 2.0 * p[1] - 1.0, 2.0 * p[2] - 1.0).normalize_or_zero();
+    [v.x, v.y, v.z]
 }
 
 /// Unfiltered `heighttonormal` from the height's gradient `dh` with respect to the texture
@@ -86,6 +108,14 @@ pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], _: &mut Ctx) 
         let mut out = Filtered::zero(ty);
         for k in 0..3 {
             out.ch[k] = Moments::constant(r[k] as f32);
+        }
+        return out;
+    }
+    if let NormalOp::ObjectSpace = op {
+        let xs = [ins[0].ch[0], ins[0].ch[1], ins[0].ch[2]];
+        let mut out = Filtered::zero(ty);
+        for k in 0..3 {
+            out.ch[k] = moments::nary(&xs, |p| object_space_point(p)[k]);
         }
         return out;
     }
