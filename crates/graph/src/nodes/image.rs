@@ -178,6 +178,32 @@ fn pyramid(path: &Path, srgb: bool) -> Result<Arc<Pyramid>, String> {
     Ok(p)
 }
 
+impl Texture {
+    /// The file at `path` (sRGB-decoded if `srgb`), read periodically along u and v: the
+    /// lookups of `hextiledimage` (the pyramid is shared with other nodes reading it).
+    pub(crate) fn periodic(path: &Path, srgb: bool) -> Result<Texture, String> {
+        Ok(Texture { pyramid: pyramid(path, srgb)?, u: Address::Periodic, v: Address::Periodic, tiled: false })
+    }
+
+    /// Channels in the file (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA): the argument of
+    /// [`channel`].
+    pub(crate) fn file_channels(&self) -> usize {
+        self.pyramid.channels
+    }
+
+    /// Width and height of the file, in texels.
+    pub(crate) fn size(&self) -> (usize, usize) {
+        (self.pyramid.levels[0].w, self.pyramid.levels[0].h)
+    }
+
+    /// Mean and mean square of each RGBA channel over the whole image (its 1 × 1 level: the
+    /// box levels preserve both exactly).
+    pub(crate) fn global_moments(&self) -> ([f64; 4], [f64; 4]) {
+        let top = self.pyramid.levels.last().expect("a pyramid has a level");
+        (top.px[0].map(|x| x as f64), top.sq[0].map(|x| x as f64))
+    }
+}
+
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     use Def::*;
     use InType::*;
@@ -295,7 +321,7 @@ fn filtered_level(t: &Texture, l: &Level, m: DVec2, s: DVec2) -> [[f64; 4]; 4] {
 }
 
 /// Maps file channels to output channel `k` of an `n`-channel output.
-fn channel(p: &[f64; 4], file_channels: usize, k: usize) -> f64 {
+pub(crate) fn channel(p: &[f64; 4], file_channels: usize, k: usize) -> f64 {
     match file_channels {
         1 => {
             if k < 3 {
@@ -315,6 +341,40 @@ fn channel(p: &[f64; 4], file_channels: usize, k: usize) -> f64 {
     }
 }
 
+/// The Gaussian average over `N(m, diag(s²))` (image uv, `v = 0` the bottom row) of the
+/// file's bilinear reconstruction, per file channel (RGBA): `[value, mean square, ∂/∂u, ∂/∂v]`.
+/// Up to 1 texel (major axis) it is taken exactly at level 0. Beyond, at levels L and L + 1
+/// around lod = log2(σ), where σ is 1–2 texels, less the spread a level's own box and tent
+/// already add (1/4 texel²), blended linearly in lod. `point`: the bilinear lookup.
+pub(crate) fn filtered_rgba(t: &Texture, m: DVec2, s: DVec2, point: bool) -> [[f64; 4]; 4] {
+    let pyr = &t.pyramid;
+    let l0 = &pyr.levels[0];
+    let sigma_texels = (s.x * l0.w as f64).max(s.y * l0.h as f64);
+    let top = (pyr.levels.len() - 1) as f64;
+    let lod = if point || sigma_texels <= 1.0 { 0.0 } else { sigma_texels.log2().min(top) };
+    let (la, frac) = (lod.floor() as usize, lod - lod.floor());
+    let lb = (la + 1).min(pyr.levels.len() - 1);
+    let at = |l: usize| {
+        let lv = &pyr.levels[l];
+        let sl = if l == 0 {
+            s
+        } else {
+            // Spread left to apply, in level-l texels, mapped back to uv.
+            let k = DVec2::new(lv.w as f64, lv.h as f64);
+            let st = s * k;
+            DVec2::new((st.x * st.x - 0.25).max(0.0).sqrt(), (st.y * st.y - 0.25).max(0.0).sqrt()) / k
+        };
+        filtered_level(t, lv, m, sl)
+    };
+    let ra = at(la);
+    if frac > 0.0 && lb != la {
+        let rb = at(lb);
+        std::array::from_fn(|q| std::array::from_fn(|c| ra[q][c] + (rb[q][c] - ra[q][c]) * frac))
+    } else {
+        ra
+    }
+}
+
 pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let n = ty.channels();
     let default = &ins[0];
@@ -331,36 +391,7 @@ pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
     let s = DVec2::new(tc.ch[0].sigma() as f64, tc.ch[1].sigma() as f64) * scale.abs();
     let j = [tc.ch[0].grad * scale.x as f32, tc.ch[1].grad * scale.y as f32];
     let pyr = &t.pyramid;
-    let l0 = &pyr.levels[0];
-    // Up to 1 texel (major axis) the Gaussian average of the bilinear reconstruction is taken
-    // exactly at level 0. Beyond, at levels L and L + 1 around lod = log2(σ), where σ is 1–2
-    // texels, less the spread a level's own box and tent already add (1/4 texel²), blended
-    // linearly in lod.
-    let sigma_texels = (s.x * l0.w as f64).max(s.y * l0.h as f64);
-    let top = (pyr.levels.len() - 1) as f64;
-    let lod = if ctx.point || sigma_texels <= 1.0 { 0.0 } else { sigma_texels.log2().min(top) };
-    let (la, frac) = (lod.floor() as usize, lod - lod.floor());
-    let lb = (la + 1).min(pyr.levels.len() - 1);
-    let at = |l: usize| {
-        let lv = &pyr.levels[l];
-        let sl = if l == 0 {
-            s
-        } else {
-            // Spread left to apply, in level-l texels, mapped back to uv.
-            let k = DVec2::new(lv.w as f64, lv.h as f64);
-            let st = s * k;
-            DVec2::new((st.x * st.x - 0.25).max(0.0).sqrt(), (st.y * st.y - 0.25).max(0.0).sqrt()) / k
-        };
-        filtered_level(t, lv, m, sl)
-    };
-    let ra = at(la);
-    let r = if frac > 0.0 && lb != la {
-        let rb = at(lb);
-        std::array::from_fn::<[f64; 4], 4, _>(|q| std::array::from_fn(|c| ra[q][c] + (rb[q][c] - ra[q][c]) * frac))
-    } else {
-        ra
-    };
-    let (v, sq, dx, dy) = (r[0], r[1], r[2], r[3]);
+    let [v, sq, dx, dy] = filtered_rgba(t, m, s, ctx.point);
     ctx.work.lattice += 4;
     // Constant address mode: the footprint's mass inside [0, 1] per constant axis.
     let inside = |mode: Address, m: f64, s: f64| -> (f64, f64) {

@@ -9,6 +9,7 @@ pub(crate) mod channel;
 pub(crate) mod color;
 pub(crate) mod geometry;
 pub(crate) mod hash;
+pub(crate) mod hextile;
 pub(crate) mod image;
 pub(crate) mod math;
 pub(crate) mod noise;
@@ -237,6 +238,8 @@ pub enum Op {
     Normal(normal::NormalOp),
     /// `image`, `tiledimage`.
     Image(Arc<image::Texture>),
+    /// `hextiledimage`.
+    HexTile(Arc<hextile::HexTile>),
 }
 
 /// Per-evaluation context handed to nodes.
@@ -261,6 +264,7 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Channel(c) => channel::eval(c, ty, ins, ctx),
         Op::Color(c) => color::eval(c, ty, ins, ctx),
         Op::Image(t) => image::eval(t, ty, ins, ctx),
+        Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
     };
     if ctx.point {
@@ -301,6 +305,7 @@ pub fn supported() -> Vec<&'static str> {
         channel::CATEGORIES,
         color::CATEGORIES,
         image::CATEGORIES,
+        hextile::CATEGORIES,
         normal::CATEGORIES,
     ] {
         v.extend_from_slice(f);
@@ -326,6 +331,7 @@ pub fn definition(category: &str) -> Option<NodeDef> {
         .or_else(|| channel::definition(category))
         .or_else(|| color::definition(category))
         .or_else(|| image::definition(category))
+        .or_else(|| hextile::definition(category))
         .or_else(|| normal::definition(category))
 }
 

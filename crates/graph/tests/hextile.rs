@@ -1,0 +1,631 @@
+//! `hextiledimage`: unfiltered values against a separate transcription of MaterialX's GLSL
+//! (`mx_hextiledimage.glsl`, `lib/mx_hextile.glsl`) in f64; the degenerate case that is
+//! `tiledimage`; filtered values against brute-force Gaussian supersampling; cost; load errors.
+//!
+//! The reference below is written from the shader source, not from the node's code: GLSL's
+//! column-major `mat2` and `v * M` / `M * v` products are spelled out, and so are `fract`,
+//! `step`, `mix`. Everything is f64 except the per-tile hash, which MaterialX defines by `f32`
+//! arithmetic (its `fract` of products near 10⁴ keeps ~3 decimals in f32; an f64 hash would
+//! be a different random pattern).
+
+mod common;
+
+use common::Rng;
+use glam::{Mat2, Vec2};
+use graph::{Document, EvalScratch, Footprint, Graph, LoadErrorKind, LoadOptions, OutputId};
+use std::path::{Path, PathBuf};
+
+const W: u32 = 32;
+const H: u32 = 24;
+
+/// The test texture's texels (file rows, row 0 = top), RGBA 8-bit: smooth ramps, 4-texel
+/// checks and texel noise, so that luminance varies at every scale.
+fn texels() -> Vec<[u8; 4]> {
+    let mut rng = Rng(0x0bad_5eed);
+    let mut px = Vec::new();
+    for y in 0..H {
+        for x in 0..W {
+            let n = rng.uniform();
+            let r = 0.7 * x as f64 / (W - 1) as f64 + 0.3 * n;
+            let g = 0.5 * y as f64 / (H - 1) as f64 + 0.4 * (((x / 4 + y / 4) % 2) as f64);
+            let b = 0.2 + 0.8 * rng.uniform() * n;
+            let a = 0.3 + 0.7 * ((x as f64 * 0.4).sin() * 0.5 + 0.5);
+            px.push([r, g, b, a].map(|c| (c.clamp(0.0, 1.0) * 255.0).round() as u8));
+        }
+    }
+    px
+}
+
+/// The texture as an RGBA PNG, written once.
+fn test_png() -> PathBuf {
+    static PATH: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("graph-hextile-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("hex.png");
+        let px = texels();
+        let img = image::RgbaImage::from_fn(W, H, |x, y| image::Rgba(px[(y * W + x) as usize]));
+        img.save(&path).unwrap();
+        path
+    })
+    .clone()
+}
+
+fn graph_of(body: &str) -> Graph {
+    let text =
+        format!(r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">{body}</nodegraph></materialx>"#);
+    Document::parse(&text, "test.mtlx".as_ref(), &LoadOptions::default()).unwrap().into_graph()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Reference: MaterialX's GLSL, transcribed.
+
+/// GLSL `mat2(a, b, c, d)`: columns (a, b) and (c, d).
+#[derive(Clone, Copy)]
+struct Mat2x2 {
+    c0: [f64; 2],
+    c1: [f64; 2],
+}
+
+fn mat2(a: f64, b: f64, c: f64, d: f64) -> Mat2x2 {
+    Mat2x2 { c0: [a, b], c1: [c, d] }
+}
+
+/// GLSL `M * v`.
+fn m_mul_v(m: Mat2x2, v: [f64; 2]) -> [f64; 2] {
+    [m.c0[0] * v[0] + m.c1[0] * v[1], m.c0[1] * v[0] + m.c1[1] * v[1]]
+}
+
+/// GLSL `v * M`: the dot products of `v` with the columns.
+fn v_mul_m(v: [f64; 2], m: Mat2x2) -> [f64; 2] {
+    [v[0] * m.c0[0] + v[1] * m.c0[1], v[0] * m.c1[0] + v[1] * m.c1[1]]
+}
+
+fn fract(x: f64) -> f64 {
+    x - x.floor()
+}
+
+fn mix(a: f64, b: f64, t: f64) -> f64 {
+    a * (1.0 - t) + b * t
+}
+
+/// `mx_hextile_hash(vec2(id) + vec2(0.12345))` in f32.
+fn hash_f32(id: [i64; 2]) -> [f64; 2] {
+    let fr = |x: f32| x - x.floor();
+    let p = [id[0] as f32 + 0.12345f32, id[1] as f32 + 0.12345f32];
+    let mut p3 = [fr(p[0] * 0.1031), fr(p[1] * 0.1030), fr(p[0] * 0.0973)];
+    let yzx = [p3[1] + 33.33, p3[2] + 33.33, p3[0] + 33.33];
+    let dot = p3[0] * yzx[0] + p3[1] * yzx[1] + p3[2] * yzx[2];
+    for c in p3.iter_mut() {
+        *c += dot;
+    }
+    [fr((p3[0] + p3[1]) * p3[2]) as f64, fr((p3[0] + p3[2]) * p3[1]) as f64]
+}
+
+/// `mx_schlick_gain`.
+fn schlick_gain(x: f64, r: f64) -> f64 {
+    let rr = r.clamp(0.001, 0.999);
+    let a = (1.0 / rr - 2.0) * (1.0 - 2.0 * x);
+    if x < 0.5 {
+        x / (a + 1.0)
+    } else {
+        (a - x) / (a - 1.0)
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Params {
+    tiling: [f64; 2],
+    rotation: f64,
+    rotationrange: [f64; 2],
+    scale: f64,
+    scalerange: [f64; 2],
+    offset: f64,
+    offsetrange: [f64; 2],
+    falloff: f64,
+    falloffcontrast: f64,
+    lumacoeffs: [f64; 3],
+}
+
+/// The nodedef defaults (`stdlib_defs.mtlx`).
+const DEFAULTS: Params = Params {
+    tiling: [1.0, 1.0],
+    rotation: 1.0,
+    rotationrange: [0.0, 360.0],
+    scale: 1.0,
+    scalerange: [0.5, 2.0],
+    offset: 1.0,
+    offsetrange: [0.0, 1.0],
+    falloff: 0.5,
+    falloffcontrast: 0.5,
+    lumacoeffs: [0.2722287, 0.6740818, 0.0536895],
+};
+
+impl Params {
+    /// The node's inputs that differ from the defaults, as MaterialX XML.
+    fn xml(&self) -> String {
+        let v2 = |n: &str, v: [f64; 2], d: [f64; 2]| {
+            if v == d {
+                String::new()
+            } else {
+                format!(r#"<input name="{n}" type="vector2" value="{}, {}"/>"#, v[0], v[1])
+            }
+        };
+        let f = |n: &str, v: f64, d: f64| {
+            if v == d {
+                String::new()
+            } else {
+                format!(r#"<input name="{n}" type="float" value="{v}"/>"#)
+            }
+        };
+        let d = DEFAULTS;
+        let mut s = String::new();
+        s += &v2("tiling", self.tiling, d.tiling);
+        s += &f("rotation", self.rotation, d.rotation);
+        s += &v2("rotationrange", self.rotationrange, d.rotationrange);
+        s += &f("scale", self.scale, d.scale);
+        s += &v2("scalerange", self.scalerange, d.scalerange);
+        s += &f("offset", self.offset, d.offset);
+        s += &v2("offsetrange", self.offsetrange, d.offsetrange);
+        s += &f("falloff", self.falloff, d.falloff);
+        s += &f("falloffcontrast", self.falloffcontrast, d.falloffcontrast);
+        if self.lumacoeffs != d.lumacoeffs {
+            let l = self.lumacoeffs;
+            s += &format!(r#"<input name="lumacoeffs" type="color3" value="{}, {}, {}"/>"#, l[0], l[1], l[2]);
+        }
+        s
+    }
+}
+
+/// The texture as MaterialX samples it: linear values, `v = 0` the bottom row, periodic,
+/// bilinear between texel centres.
+struct RefTexture {
+    px: Vec<[f64; 4]>,
+}
+
+impl RefTexture {
+    fn new(srgb: bool) -> RefTexture {
+        let decode = |c: f64| if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+        let px = texels()
+            .iter()
+            .map(|p| {
+                let mut c = p.map(|x| x as f64 / 255.0);
+                if srgb {
+                    for x in c.iter_mut().take(3) {
+                        *x = decode(*x);
+                    }
+                }
+                c
+            })
+            .collect();
+        RefTexture { px }
+    }
+
+    /// Texel (i, j), j counted from the bottom row, wrapped.
+    fn texel(&self, i: i64, j: i64) -> [f64; 4] {
+        let (w, h) = (W as i64, H as i64);
+        let (i, j) = (i.rem_euclid(w), j.rem_euclid(h));
+        self.px[((h - 1 - j) * w + i) as usize]
+    }
+
+    fn sample(&self, uv: [f64; 2]) -> [f64; 4] {
+        let x = uv[0] * W as f64 - 0.5;
+        let y = uv[1] * H as f64 - 0.5;
+        let (i, j) = (x.floor() as i64, y.floor() as i64);
+        let (fx, fy) = (x - x.floor(), y - y.floor());
+        let mut out = [0.0; 4];
+        for (di, dj, wgt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)]
+        {
+            let t = self.texel(i + di, j + dj);
+            for c in 0..4 {
+                out[c] += wgt * t[c];
+            }
+        }
+        out
+    }
+}
+
+/// `mx_hextiledimage_color4` (RGB: `mx_hextiledimage_color3`) at `tex_coord`.
+fn reference(p: &Params, tex: &RefTexture, tex_coord: [f64; 2]) -> [f64; 4] {
+    // mx_transform_uv(tex_coord, tiling, vec2(0.0))
+    let coord = [tex_coord[0] * p.tiling[0], tex_coord[1] * p.tiling[1]];
+    // mx_hextile_coord
+    let sqrt3_2 = 3.0f64.sqrt() * 2.0;
+    let st = [coord[0] * sqrt3_2, coord[1] * sqrt3_2];
+    let to_skewed = mat2(1.0, 0.0, -0.57735027, 1.15470054);
+    let st_skewed = m_mul_v(to_skewed, st);
+    let st_frac = [fract(st_skewed[0]), fract(st_skewed[1])];
+    let temp_z = 1.0 - st_frac[0] - st_frac[1];
+    let s = if -temp_z < 0.0 { 0.0 } else { 1.0 }; // step(0.0, -temp.z)
+    let s2 = 2.0 * s - 1.0;
+    let weights = [-temp_z * s2, s - st_frac[1] * s2, s - st_frac[0] * s2];
+    let base_id = [st_skewed[0].floor() as i64, st_skewed[1].floor() as i64];
+    let si = s as i64;
+    let ids = [
+        [base_id[0] + si, base_id[1] + si],
+        [base_id[0] + si, base_id[1] + 1 - si],
+        [base_id[0] + 1 - si, base_id[1] + si],
+    ];
+    let inv_skewed = mat2(1.0, 0.0, 0.5, 1.0 / 1.15470054);
+    let rr = [p.rotationrange[0].to_radians(), p.rotationrange[1].to_radians()];
+    let mut colours = [[0.0; 4]; 3];
+    for (k, id) in ids.iter().enumerate() {
+        let ctr = m_mul_v(inv_skewed, [id[0] as f64 / sqrt3_2, id[1] as f64 / sqrt3_2]);
+        let rand = hash_f32(*id);
+        let rot = mix(rr[0], rr[1], rand[0] * p.rotation);
+        let rm = mat2(rot.cos(), -rot.sin(), rot.sin(), rot.cos());
+        let scale = mix(1.0, mix(p.scalerange[0], p.scalerange[1], rand[1]), p.scale);
+        let offset = [
+            mix(p.offsetrange[0], p.offsetrange[1], rand[0] * p.offset),
+            mix(p.offsetrange[0], p.offsetrange[1], rand[1] * p.offset),
+        ];
+        let rotated = v_mul_m([coord[0] - ctr[0], coord[1] - ctr[1]], rm);
+        let at = [rotated[0] / scale + ctr[0] + offset[0], rotated[1] / scale + ctr[1] + offset[1]];
+        colours[k] = tex.sample(at);
+    }
+    // luminance as weights
+    let mut w = [0.0; 3];
+    for k in 0..3 {
+        let l = p.lumacoeffs;
+        let cw = colours[k][0] * l[0] + colours[k][1] * l[1] + colours[k][2] * l[2];
+        let cw = mix(1.0, cw, p.falloffcontrast);
+        w[k] = cw * weights[k].powf(7.0);
+    }
+    let sum: f64 = w.iter().sum();
+    w = w.map(|x| x / sum);
+    let mut a = (colours[0][3] + colours[1][3] + colours[2][3]) / 3.0;
+    if p.falloff != 0.5 {
+        w = w.map(|x| schlick_gain(x, p.falloff));
+        let sum: f64 = w.iter().sum();
+        w = w.map(|x| x / sum);
+        a = schlick_gain(a, p.falloff);
+    }
+    let mut out = [0.0; 4];
+    for c in 0..3 {
+        out[c] = w[0] * colours[0][c] + w[1] * colours[1][c] + w[2] * colours[2][c];
+    }
+    out[3] = a;
+    out
+}
+
+// ---------------------------------------------------------------------------------------------
+
+fn hextile_graph(p: &Params, ty: &str, colorspace: &str) -> Graph {
+    let file = test_png();
+    let cs = if colorspace.is_empty() { String::new() } else { format!(r#" colorspace="{colorspace}""#) };
+    graph_of(&format!(
+        r#"<hextiledimage name="h" type="{ty}"><input name="file" type="filename" value="{}"{cs}/>{}</hextiledimage><output name="out" type="{ty}" nodename="h"/>"#,
+        file.display(),
+        p.xml()
+    ))
+}
+
+fn cases() -> Vec<(&'static str, Params)> {
+    vec![
+        ("defaults", DEFAULTS),
+        (
+            "custom",
+            Params {
+                tiling: [2.0, 3.0],
+                rotation: 0.7,
+                rotationrange: [-30.0, 90.0],
+                scale: 0.6,
+                scalerange: [0.8, 1.5],
+                offset: 0.5,
+                offsetrange: [-0.2, 0.4],
+                falloff: 0.2,
+                falloffcontrast: 0.8,
+                lumacoeffs: [0.2126, 0.7152, 0.0722],
+            },
+        ),
+        ("soft falloff", Params { falloff: 0.85, falloffcontrast: 1.0, tiling: [0.7, 1.3], ..DEFAULTS }),
+        ("no contrast", Params { falloffcontrast: 0.0, scale: 0.0, ..DEFAULTS }),
+    ]
+}
+
+#[test]
+fn unfiltered_matches_materialx_formulas() {
+    let mut rng = Rng(0x4e7_711e);
+    let mut worst = 0.0f64;
+    for (name, p) in cases() {
+        for (ty, cs) in [("color3", ""), ("color4", ""), ("color3", "srgb_texture")] {
+            let tex = RefTexture::new(!cs.is_empty());
+            let g = hextile_graph(&p, ty, cs);
+            let out = g.output_id("g/out").unwrap();
+            let mut scratch = EvalScratch::new(&g);
+            let n = if ty == "color4" { 4 } else { 3 };
+            let mut max_err = 0.0f64;
+            for _ in 0..3000 {
+                let uv = [rng.uniform() * 8.0 - 4.0, rng.uniform() * 8.0 - 4.0];
+                let f = g.eval_output(out, &Footprint::point(Vec2::new(uv[0] as f32, uv[1] as f32)), &mut scratch);
+                // The reference at the f32 point the graph saw.
+                let r = reference(&p, &tex, [uv[0] as f32 as f64, uv[1] as f32 as f64]);
+                for (c, rc) in r.iter().enumerate().take(n) {
+                    let e = (f.ch[c].mean as f64 - rc).abs();
+                    assert!(f.ch[c].var == 0.0 && f.ch[c].grad == Vec2::ZERO);
+                    max_err = max_err.max(e);
+                }
+            }
+            println!("{name:<14} {ty} {cs:<13} max |node − reference| = {max_err:.2e}");
+            assert!(max_err < 1e-4, "{name} {ty} {cs}: max error {max_err:.2e}");
+            worst = worst.max(max_err);
+        }
+    }
+    println!("worst {worst:.2e}");
+}
+
+/// The GLSL's hash at a few vertices, hand-checked against the shader's arithmetic; and the
+/// tile pattern really varies (a test of the reference as much as of the node).
+#[test]
+fn reference_sanity() {
+    let h = hash_f32([0, 0]);
+    assert!(h.iter().all(|x| (0.0..1.0).contains(x)));
+    assert_ne!(hash_f32([1, 0]), hash_f32([0, 1]));
+    let tex = RefTexture::new(false);
+    // Rotations and offsets make neighbouring hex tiles differ from plain tiling.
+    let plain = Params { rotationrange: [0.0, 0.0], scalerange: [1.0, 1.0], offsetrange: [0.0, 0.0], ..DEFAULTS };
+    let mut differ = 0;
+    for k in 0..200 {
+        let uv = [0.013 * k as f64, 0.021 * k as f64 - 1.0];
+        let a = reference(&DEFAULTS, &tex, uv);
+        let b = reference(&plain, &tex, uv);
+        let c = tex.sample(uv);
+        assert!((b[0] - c[0]).abs() < 1e-12 && (b[2] - c[2]).abs() < 1e-12, "plain hex tiling is the image");
+        if (a[0] - b[0]).abs() > 0.05 {
+            differ += 1;
+        }
+    }
+    assert!(differ > 100, "{differ}");
+}
+
+/// With every random range of zero width at the identity (rotation 0°, scale 1, offset 0), the
+/// three blended lookups are one and the same: `hextiledimage` is `tiledimage`, unfiltered and
+/// filtered at every footprint size (the tiles beyond the centre's three are taken to be like
+/// them: their maps coincide).
+#[test]
+fn identity_ranges_are_tiledimage() {
+    let file = test_png();
+    let f = file.display();
+    for (tiling, falloff) in [([1.0, 1.0], 0.5), ([2.5, 1.5], 0.3)] {
+        let p = Params {
+            tiling,
+            rotationrange: [0.0, 0.0],
+            scalerange: [1.0, 1.0],
+            offsetrange: [0.0, 0.0],
+            falloff,
+            falloffcontrast: 0.9,
+            ..DEFAULTS
+        };
+        let hex = hextile_graph(&p, "color3", "");
+        let tiled = graph_of(&format!(
+            r#"<tiledimage name="t" type="color3"><input name="file" type="filename" value="{f}"/><input name="uvtiling" type="vector2" value="{}, {}"/></tiledimage><output name="out" type="color3" nodename="t"/>"#,
+            tiling[0], tiling[1]
+        ));
+        let (ho, to) = (hex.output_id("g/out").unwrap(), tiled.output_id("g/out").unwrap());
+        let (mut hs, mut ts) = (EvalScratch::new(&hex), EvalScratch::new(&tiled));
+        let mut rng = Rng(77);
+        for sigma in [0.0, 1e-4, 1e-3, 0.01, 0.03, 0.05, 0.1, 0.3, 1.0, 3.0, 30.0] {
+            let mut max_err = 0.0f64;
+            let mut max_grad = 0.0f64;
+            for _ in 0..200 {
+                let uv = Vec2::new(rng.uniform() as f32 * 6.0 - 3.0, rng.uniform() as f32 * 6.0 - 3.0);
+                let a = 0.3 + 0.7 * rng.uniform() as f32;
+                let r = Mat2::from_angle(rng.uniform() as f32 * 3.2);
+                let l = r * Mat2::from_diagonal(Vec2::new(sigma as f32, a * sigma as f32));
+                let fp = Footprint::new(uv, l * l.transpose());
+                let x = hex.eval_output(ho, &fp, &mut hs);
+                let y = tiled.eval_output(to, &fp, &mut ts);
+                for c in 0..3 {
+                    max_err = max_err.max((x.ch[c].mean - y.ch[c].mean).abs() as f64);
+                    max_grad = max_grad.max((x.ch[c].grad - y.ch[c].grad).abs().max_element() as f64);
+                }
+            }
+            println!("tiling {tiling:?} σ={sigma:<7} max |hex − tiled| = {max_err:.2e}, gradient {max_grad:.2e}");
+            assert!(max_err < 1e-5, "σ={sigma}: {max_err:.2e}");
+            assert!(max_grad < 1e-3, "σ={sigma}: gradient {max_grad:.2e}");
+        }
+    }
+}
+
+/// Mean abs error of (filtered, point) against brute force, per σ (as in `filter.rs`): random
+/// anisotropic footprints `R diag(σ², (aσ)²) Rᵀ`, 2048 samples from a shifted R2 sequence
+/// through Box–Muller.
+fn errors(g: &Graph, out: OutputId, sigmas: &[f32], seed: u64) -> Vec<(f32, f64, f64, f64, f64)> {
+    const SAMPLES: usize = 2048;
+    const CENTRES: usize = 12;
+    let mut rng = Rng(seed);
+    let mut scratch = EvalScratch::new(g);
+    let n = g.output(out).ty.channels();
+    let mut rows = Vec::new();
+    for &sigma in sigmas {
+        let (mut ef, mut ep, mut spread, mut sd) = (0.0, 0.0, 0.0, 0.0);
+        for _ in 0..CENTRES {
+            let uv = Vec2::new(rng.uniform() as f32 * 4.0 - 2.0, rng.uniform() as f32 * 4.0 - 2.0);
+            let a = 0.25 + 0.75 * rng.uniform() as f32;
+            let r = Mat2::from_angle(rng.uniform() as f32 * std::f32::consts::PI);
+            let l = r * Mat2::from_diagonal(Vec2::new(sigma, a * sigma));
+            let f = g.eval_output(out, &Footprint::new(uv, l * l.transpose()), &mut scratch);
+            let p = g.eval_output(out, &Footprint::point(uv), &mut scratch);
+            let (mut acc, mut acc2) = ([0.0f64; 4], [0.0f64; 4]);
+            let shift = (rng.uniform(), rng.uniform());
+            for s in 0..SAMPLES {
+                let u1 = (shift.0 + 0.754_877_666_246_692_7 * (s as f64 + 0.5)).fract();
+                let u2 = (shift.1 + 0.569_840_290_998_053_3 * (s as f64 + 0.5)).fract();
+                let rad = (-2.0 * u1.max(1e-12).ln()).sqrt();
+                let z = Vec2::new(
+                    (rad * (2.0 * std::f64::consts::PI * u2).cos()) as f32,
+                    (rad * (2.0 * std::f64::consts::PI * u2).sin()) as f32,
+                );
+                let v = g.eval_output(out, &Footprint::point(uv + l * z), &mut scratch);
+                for k in 0..n {
+                    acc[k] += v.ch[k].mean as f64;
+                    acc2[k] += (v.ch[k].mean as f64).powi(2);
+                }
+            }
+            for k in 0..n {
+                let b = acc[k] / SAMPLES as f64;
+                ef += (f.ch[k].mean as f64 - b).abs();
+                ep += (p.ch[k].mean as f64 - b).abs();
+                spread += (acc2[k] / SAMPLES as f64 - b * b).max(0.0).sqrt();
+                sd += f.ch[k].sigma() as f64;
+            }
+        }
+        let d = (CENTRES * n) as f64;
+        rows.push((sigma, ef / d, ep / d, spread / d, sd / d));
+    }
+    rows
+}
+
+/// Filtered values against supersampling (mean abs error per channel, values in [0, 1]):
+/// - σ ≤ 1e-4 uv: within 1e-4 of the brute force (the unfiltered value);
+/// - σ ≥ 1e-3 uv, where point sampling errs by more than 0.01: at most 0.3 of its error;
+/// - σ ≥ 3 hex tiles (triangle edges): within 0.02 of the brute force (which is the mean over
+///   the few hundred random tiles a footprint of that size covers, not the ensemble mean the
+///   node returns, plus the luminance weighting's bias against the plain image mean);
+/// - σ ≥ 1e-3 uv: the node's reported spread √var within [0.7, 1.6] × the samples' spread
+///   (measured 0.9–1.45: over the three lookups it is combined as fully correlated, and beyond a
+///   tile it is the image's global spread, which the blend reduces).
+#[test]
+fn filtered_matches_supersampling() {
+    let sigmas = [1e-6, 1e-4, 1e-3, 3e-3, 1e-2, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
+    let mut failures = Vec::new();
+    println!(
+        "{:<14} {:>7} {:>8} {:>10} {:>10} {:>7} {:>9} {:>9}",
+        "case", "type", "sigma", "filt err", "point err", "ratio", "spread", "σ(node)"
+    );
+    for (ci, (name, p)) in cases().into_iter().enumerate() {
+        for ty in ["color3", "color4"] {
+            if ty == "color4" && ci > 1 {
+                continue;
+            }
+            let g = hextile_graph(&p, ty, "");
+            let out = g.output_id("g/out").unwrap();
+            let tile_uv = 1.0 / (2.0 * 3.0f64.sqrt() * p.tiling[0].min(p.tiling[1]));
+            for (sigma, ef, ep, spread, sd) in errors(&g, out, &sigmas, 0xabc0 ^ ci as u64) {
+                let ratio = ef / ep.max(1e-12);
+                println!("{name:<14} {ty:>7} {sigma:>8.0e} {ef:>10.2e} {ep:>10.2e} {ratio:>7.3} {spread:>9.2e} {sd:>9.2e}");
+                if sigma <= 1e-4 && ef > 1e-4 {
+                    failures.push(format!("{name} {ty} σ={sigma}: filtered error {ef:.2e} at a tiny footprint"));
+                }
+                if sigma >= 1e-3 && ep > 0.01 && ratio > 0.3 {
+                    failures.push(format!("{name} {ty} σ={sigma}: error ratio {ratio:.3} > 0.3"));
+                }
+                if sigma >= 1e-3 && !(0.7..=1.6).contains(&(sd / spread)) {
+                    failures.push(format!("{name} {ty} σ={sigma}: spread {sd:.2e} against {spread:.2e}"));
+                }
+                if sigma as f64 >= 3.0 * tile_uv && ef > 0.02 {
+                    failures.push(format!("{name} {ty} σ={sigma}: error {ef:.2e} > 0.02 at a coarse footprint"));
+                }
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Coarse footprints cost no more than fine ones: beyond a few hex tiles the node reads only
+/// the image's mean.
+#[test]
+fn coarse_footprints_cost_less() {
+    let g = hextile_graph(&DEFAULTS, "color3", "");
+    let out = g.output_id("g/out").unwrap();
+    let mut scratch = EvalScratch::new(&g);
+    let mut work_at = |sigma: f32| {
+        scratch.reset_stats();
+        let t = std::time::Instant::now();
+        for k in 0..2000 {
+            let uv = Vec2::new(k as f32 * 0.0137, k as f32 * 0.0071);
+            let fp = if sigma == 0.0 { Footprint::point(uv) } else { Footprint::isotropic(uv, sigma) };
+            std::hint::black_box(g.eval_output(out, &fp, &mut scratch));
+        }
+        (scratch.work().lattice, t.elapsed().as_secs_f64())
+    };
+    let point = work_at(0.0);
+    let fine = work_at(1e-3);
+    let mid = work_at(0.1);
+    let coarse = work_at(10.0);
+    println!("lattice work, seconds per 2000: point {point:?}, σ=1e-3 {fine:?}, σ=0.1 {mid:?}, σ=10 {coarse:?}");
+    assert!(coarse.0 < point.0 && coarse.0 < fine.0 && mid.0 <= fine.0);
+}
+
+/// Every footprint shape gives finite moments (degenerate, huge, zero).
+#[test]
+fn finite_for_every_footprint() {
+    for (_, p) in cases() {
+        let g = hextile_graph(&p, "color4", "");
+        let out = g.output_id("g/out").unwrap();
+        let mut scratch = EvalScratch::new(&g);
+        for uv in [Vec2::new(0.3, 0.7), Vec2::new(-12.25, 3.5), Vec2::new(1e4, -3e3)] {
+            for cov in [
+                Mat2::ZERO,
+                Mat2::from_diagonal(Vec2::splat(1e-14)),
+                Mat2::from_diagonal(Vec2::new(1e-4, 0.0)),
+                Mat2::from_cols(Vec2::new(1e-2, 1e-2), Vec2::new(1e-2, 1e-2)),
+                Mat2::from_diagonal(Vec2::splat(0.04)),
+                Mat2::from_diagonal(Vec2::splat(1e6)),
+            ] {
+                let f = g.eval_output(out, &Footprint::new(uv, cov), &mut scratch);
+                for m in &f.ch {
+                    assert!(m.mean.is_finite() && m.var.is_finite() && m.grad.is_finite(), "{uv} {cov}: {m:?}");
+                }
+            }
+        }
+    }
+}
+
+/// A black texture with `falloffcontrast = 1` zeroes every luminance weight (MaterialX divides
+/// by zero there): the node falls back to the barycentric weights and stays finite.
+#[test]
+fn black_texture_full_contrast_is_finite() {
+    let dir = std::env::temp_dir().join(format!("graph-hextile-black-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("black.png");
+    image::RgbImage::from_pixel(4, 4, image::Rgb([0, 0, 0])).save(&path).unwrap();
+    let g = graph_of(&format!(
+        r#"<hextiledimage name="h" type="color3"><input name="file" type="filename" value="{}"/><input name="falloffcontrast" type="float" value="1"/><input name="falloff" type="float" value="0.2"/></hextiledimage><output name="out" type="color3" nodename="h"/>"#,
+        path.display()
+    ));
+    let out = g.output_id("g/out").unwrap();
+    let mut scratch = EvalScratch::new(&g);
+    for k in 0..100 {
+        let uv = Vec2::new(k as f32 * 0.031, k as f32 * -0.017);
+        for fp in [Footprint::point(uv), Footprint::isotropic(uv, 0.01)] {
+            let f = g.eval_output(out, &fp, &mut scratch);
+            assert!(f.ch.iter().all(|m| m.mean == 0.0 && m.grad.is_finite() && m.var.is_finite()), "{f:?}");
+        }
+    }
+}
+
+/// A document naming a missing file fails to load with the file and line of the input.
+#[test]
+fn missing_file_names_document_and_line() {
+    let dir = std::env::temp_dir().join(format!("graph-hextile-missing-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("missing.mtlx");
+    let text = "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n  <nodegraph name=\"g\">\n    <hextiledimage name=\"h\" type=\"color3\">\n      <input name=\"file\" type=\"filename\" value=\"no_such_texture.png\"/>\n    </hextiledimage>\n    <output name=\"out\" type=\"color3\" nodename=\"h\"/>\n  </nodegraph>\n</materialx>\n";
+    std::fs::write(&path, text).unwrap();
+    let e = Document::load(&path).expect_err("the file is missing");
+    println!("{e}");
+    assert_eq!(e.location.file, path);
+    assert_eq!(e.location.line, 5, "{e}");
+    assert!(matches!(&e.kind, LoadErrorKind::MissingFile(p) if p == Path::new("no_such_texture.png")), "{e}");
+    let msg = e.to_string();
+    assert!(msg.starts_with(&format!("{}:5:", path.display())) && msg.contains("no_such_texture.png"), "{msg}");
+}
+
+/// Unknown inputs (not in the nodedef) and types without a nodedef are reported as unsupported.
+#[test]
+fn unsupported_inputs_and_types() {
+    let file = test_png();
+    for (body, what) in [
+        (r#"<hextiledimage name="h" type="color3"><input name="file" type="filename" value="{f}"/><input name="uaddressmode" type="string" value="clamp"/></hextiledimage><output name="out" type="color3" nodename="h"/>"#, "uaddressmode"),
+        (r#"<hextiledimage name="h" type="float"><input name="file" type="filename" value="{f}"/></hextiledimage><output name="out" type="float" nodename="h"/>"#, "float"),
+    ] {
+        let text = format!(
+            r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">{}</nodegraph></materialx>"#,
+            body.replace("{f}", &file.display().to_string())
+        );
+        let e = Document::parse(&text, "t.mtlx".as_ref(), &LoadOptions::default()).expect_err("unsupported");
+        assert!(matches!(e.kind, LoadErrorKind::Unsupported { .. }), "{e}");
+        assert!(e.to_string().contains(what), "{e}");
+    }
+}
