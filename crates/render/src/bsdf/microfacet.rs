@@ -233,6 +233,27 @@ fn beckmann_visible_slopes(cos_t: f64, sin_t: f64, u: Vec2) -> (f64, f64) {
     (x.min(cot_t), sy)
 }
 
+/// The (generalised) half vector of a pair of directions and the cosines with it, for
+/// reflection (`wi`, `wo` on one side) or refraction with relative IOR `eta_rel` (the index on
+/// `wo`'s side over `wi`'s): `m ∝ wi + wo` or `wi + eta_rel·wo`, oriented to +z. `None` when the
+/// pair has no valid microfacet (degenerate, or the facet does not face both directions from
+/// their own sides).
+#[inline]
+pub fn half_vector(wi: Vec3, wo: Vec3, eta_rel: f32) -> Option<(Vec3, f32, f32)> {
+    let reflect = wi.z * wo.z > 0.0;
+    let h = if reflect { wi + wo } else { wi + wo * eta_rel };
+    let len2 = h.length_squared();
+    if !(len2.is_finite() && len2 > 1e-12) {
+        return None;
+    }
+    let m = h * (len2.sqrt().recip().copysign(h.z));
+    let (wi_m, wo_m) = (wi.dot(m), wo.dot(m));
+    if wi_m * wi.z <= 0.0 || wo_m * wo.z <= 0.0 {
+        return None;
+    }
+    Some((m, wi_m, wo_m))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,25 +325,4 @@ mod tests {
         assert!((md.lambda(v) - md.lambda(Vec3::new(v.x, v.y, -v.z))).abs() < 1e-7);
         assert!(md.g1(v, Vec3::Z) > 0.0 && md.g1(v, -Vec3::Z) == 0.0);
     }
-}
-
-/// The (generalised) half vector of a pair of directions and the cosines with it, for
-/// reflection (`wi`, `wo` on one side) or refraction with relative IOR `eta_rel` (the index on
-/// `wo`'s side over `wi`'s): `m ∝ wi + wo` or `wi + eta_rel·wo`, oriented to +z. `None` when the
-/// pair has no valid microfacet (degenerate, or the facet does not face both directions from
-/// their own sides).
-#[inline]
-pub fn half_vector(wi: Vec3, wo: Vec3, eta_rel: f32) -> Option<(Vec3, f32, f32)> {
-    let reflect = wi.z * wo.z > 0.0;
-    let h = if reflect { wi + wo } else { wi + wo * eta_rel };
-    let len2 = h.length_squared();
-    if !(len2.is_finite() && len2 > 1e-12) {
-        return None;
-    }
-    let m = h * (len2.sqrt().recip().copysign(h.z));
-    let (wi_m, wo_m) = (wi.dot(m), wo.dot(m));
-    if wi_m * wi.z <= 0.0 || wo_m * wo.z <= 0.0 {
-        return None;
-    }
-    Some((m, wi_m, wo_m))
 }
