@@ -1,5 +1,6 @@
 //! MaterialX 1.39 import: a document's node graphs flattened into one [`Graph`], its shaders'
-//! inputs, and its `standard_surface` materials as [`MaterialBinding`]s.
+//! inputs, and its `standard_surface`, `open_pbr_surface` and `gltf_pbr` materials as
+//! [`MaterialBinding`]s (see [`SHADING_MODELS`]).
 //!
 //! Names: a node `n` inside `<nodegraph name="g">` is `g/n`; a top-level node is `n`. Outputs
 //! likewise (`g/out`). Connections by `nodename` (+ `output` for multi-output nodes),
@@ -87,30 +88,37 @@ pub enum MaterialSource {
     Geometric,
 }
 
-/// A `standard_surface`'s supported inputs, each a constant or a graph output.
+/// A material's supported inputs, each a constant or a graph output, named as `standard_surface`
+/// names them whatever the shading model (see [`SHADING_MODELS`]).
 #[derive(Clone, Debug)]
 pub struct MaterialBinding {
     /// The material (or shader) name asked for.
     pub name: String,
-    /// The `standard_surface` node's name.
+    /// The shader node's name.
     pub shader: String,
-    /// `(input name, source)` for every supported input, in [`SUPPORTED_INPUTS`] order.
+    /// The shader node's category: one of [`SHADING_MODELS`].
+    pub model: &'static str,
+    /// `(input name, source)` for every supported input, in [`SUPPORTED_INPUTS`] order, with the
+    /// `standard_surface` names: an `open_pbr_surface`'s `base_metalness` is `metalness` here.
     pub inputs: Vec<(&'static str, MaterialSource)>,
-    /// Inputs set to non-default values that the binding does not carry.
+    /// Inputs that could not be read, and (in one message) the inputs set to non-default values
+    /// that the binding does not carry.
     pub warnings: Vec<String>,
 }
 
 impl MaterialBinding {
-    /// The source of input `name`.
+    /// The source of input `name` (a `standard_surface` name).
     pub fn get(&self, name: &str) -> Option<&MaterialSource> {
         self.inputs.iter().find(|(n, _)| *n == name).map(|(_, s)| s)
     }
 }
 
-/// A `standard_surface` input's default: its type and value, or `None` for geometric data.
+/// A material input's default: its type and value, or `None` for geometric data.
 pub type InputDefault = Option<(ValueType, [f32; 3])>;
 
-/// `standard_surface` inputs a binding carries, with their defaults.
+/// The inputs a binding carries, by their `standard_surface` names, with `standard_surface`'s
+/// defaults: the parameters of the renderer's layered BSDF (plus `opacity` and `normal`, which
+/// the renderer applies itself).
 pub const SUPPORTED_INPUTS: &[(&str, InputDefault)] = &[
     ("base", Some((ValueType::Float, [1.0, 0.0, 0.0]))),
     ("base_color", Some((ValueType::Color3, [0.8, 0.8, 0.8]))),
@@ -120,49 +128,282 @@ pub const SUPPORTED_INPUTS: &[(&str, InputDefault)] = &[
     ("specular_roughness", Some((ValueType::Float, [0.2, 0.0, 0.0]))),
     ("specular_IOR", Some((ValueType::Float, [1.5, 0.0, 0.0]))),
     ("transmission", Some((ValueType::Float, [0.0, 0.0, 0.0]))),
+    ("transmission_color", Some((ValueType::Color3, [1.0, 1.0, 1.0]))),
     ("opacity", Some((ValueType::Color3, [1.0, 1.0, 1.0]))),
     ("normal", None),
 ];
 
-/// Defaults of the `standard_surface` inputs a binding does not carry: setting one to anything
-/// else is reported as a warning.
-const UNSUPPORTED_DEFAULTS: &[(&str, f32)] = &[
-    ("diffuse_roughness", 0.0),
-    ("specular_anisotropy", 0.0),
-    ("specular_rotation", 0.0),
-    ("transmission_depth", 0.0),
-    ("transmission_scatter_anisotropy", 0.0),
-    ("transmission_dispersion", 0.0),
-    ("transmission_extra_roughness", 0.0),
-    ("subsurface", 0.0),
-    ("sheen", 0.0),
-    ("coat", 0.0),
-    ("coat_affect_color", 0.0),
-    ("coat_affect_roughness", 0.0),
-    ("thin_film_thickness", 0.0),
-    ("emission", 0.0),
-    ("transmission_color", 1.0),
-    ("subsurface_color", 1.0),
-    ("subsurface_radius", 1.0),
-    ("subsurface_scale", 1.0),
-    ("subsurface_anisotropy", 0.0),
-    ("sheen_color", 1.0),
-    ("sheen_roughness", 0.3),
-    ("coat_color", 1.0),
-    ("coat_roughness", 0.1),
-    ("coat_anisotropy", 0.0),
-    ("coat_rotation", 0.0),
-    ("coat_IOR", 1.5),
-    ("thin_film_IOR", 1.5),
-    ("emission_color", 1.0),
-    ("thin_walled", 0.0),
-];
+/// The shading models whose materials load as [`MaterialBinding`]s (MaterialX 1.39 node
+/// names). All three render with the same BSDF; see [`Document::material`] for how the other
+/// two map onto `standard_surface`'s inputs.
+pub const SHADING_MODELS: &[&str] = &["standard_surface", "open_pbr_surface", "gltf_pbr"];
+
+/// Where one [`SUPPORTED_INPUTS`] entry of a binding comes from in a shading model.
+#[derive(Clone, Copy, Debug)]
+enum Mapped {
+    /// The model's input of the same name, with the [`SUPPORTED_INPUTS`] default.
+    Same,
+    /// The model's input of this name, with the model's own default.
+    Input(&'static str, InputDefault),
+    /// The model has no such input: always this value.
+    Fixed(ValueType, f32),
+    /// glTF's `alpha` as `alpha_mode` and `alpha_cutoff` make it an opacity.
+    GltfOpacity,
+}
+
+/// How a shading model's inputs become a [`MaterialBinding`].
+struct ShadingModel {
+    category: &'static str,
+    /// Where each [`SUPPORTED_INPUTS`] entry comes from, in the same order.
+    map: &'static [Mapped],
+    /// Other inputs the binding reads, with the model's defaults.
+    extra: &'static [(&'static str, InputDefault)],
+    /// Inputs the model's own MaterialX implementation leaves out of the shader it builds (so
+    /// ignoring them renders what MaterialX renders): no warning.
+    silent: &'static [&'static str],
+    /// Inputs the renderer does not honour, with the model's defaults (one value for every
+    /// channel, or one per channel): set to anything else, they are named in a warning. Inputs
+    /// not listed anywhere (tangents, coat normals, unknown names) warn whenever set.
+    unsupported: &'static [(&'static str, &'static [f32])],
+}
+
+const fn f(v: f32) -> InputDefault {
+    Some((ValueType::Float, [v, 0.0, 0.0]))
+}
+
+const fn c3(v: f32) -> InputDefault {
+    Some((ValueType::Color3, [v, v, v]))
+}
+
+/// `standard_surface` (Autodesk Standard Surface; MaterialX 1.39's default nodedef is version
+/// 1.0.1). The defaults below are those of MaterialX's `libraries/bxdf/standard_surface.mtlx`.
+const STANDARD_SURFACE: ShadingModel = ShadingModel {
+    category: "standard_surface",
+    map: &[Mapped::Same; 11],
+    extra: &[],
+    silent: &[],
+    unsupported: &[
+        ("diffuse_roughness", &[0.0]),
+        ("specular_anisotropy", &[0.0]),
+        ("specular_rotation", &[0.0]),
+        ("transmission_depth", &[0.0]),
+        ("transmission_scatter", &[0.0]),
+        ("transmission_scatter_anisotropy", &[0.0]),
+        ("transmission_dispersion", &[0.0]),
+        ("transmission_extra_roughness", &[0.0]),
+        ("subsurface", &[0.0]),
+        ("subsurface_color", &[1.0]),
+        ("subsurface_radius", &[1.0]),
+        ("subsurface_scale", &[1.0]),
+        ("subsurface_anisotropy", &[0.0]),
+        ("sheen", &[0.0]),
+        ("sheen_color", &[1.0]),
+        ("sheen_roughness", &[0.3]),
+        ("coat", &[0.0]),
+        ("coat_color", &[1.0]),
+        ("coat_roughness", &[0.1]),
+        ("coat_anisotropy", &[0.0]),
+        ("coat_rotation", &[0.0]),
+        ("coat_IOR", &[1.5]),
+        ("coat_affect_color", &[0.0]),
+        ("coat_affect_roughness", &[0.0]),
+        ("thin_film_thickness", &[0.0]),
+        ("thin_film_IOR", &[1.5]),
+        ("emission", &[0.0]),
+        ("emission_color", &[1.0]),
+        ("thin_walled", &[0.0]),
+    ],
+};
+
+/// OpenPBR Surface. Defaults: the `ND_open_pbr_surface_surfaceshader` nodedef of MaterialX
+/// 1.39's `libraries/bxdf/open_pbr_surface.mtlx`, which the OpenPBR table of the 1.39 PBR
+/// specification (`MaterialX.PBRSpec.md`) repeats: a base of weight 1 and colour 0.8, no
+/// metalness, specular weight 1, white specular colour, specular roughness 0.3 (not 0.2 as in
+/// Standard Surface), IOR 1.5, no transmission, opacity 1, not thin-walled.
+///
+/// Mapping: `base_weight` → `base`, `base_metalness` → `metalness`, `specular_weight` →
+/// `specular`, `specular_ior` → `specular_IOR`, `transmission_weight` → `transmission`,
+/// `transmission_color` → `transmission_color` (with `transmission_depth` 0 OpenPBR reads it as a
+/// plain tint, which is what the BSDF does with it), `geometry_opacity` (a float) → `opacity`,
+/// `geometry_normal` → `normal`. `geometry_thin_walled` stands for `standard_surface`'s
+/// `thin_walled`, which the BSDF does not model: set, it is warned about, as there.
+const OPEN_PBR_SURFACE: ShadingModel = ShadingModel {
+    category: "open_pbr_surface",
+    map: &[
+        Mapped::Input("base_weight", f(1.0)),
+        Mapped::Input("base_color", c3(0.8)),
+        Mapped::Input("base_metalness", f(0.0)),
+        Mapped::Input("specular_weight", f(1.0)),
+        Mapped::Input("specular_color", c3(1.0)),
+        Mapped::Input("specular_roughness", f(0.3)),
+        Mapped::Input("specular_ior", f(1.5)),
+        Mapped::Input("transmission_weight", f(0.0)),
+        Mapped::Input("transmission_color", c3(1.0)),
+        Mapped::Input("geometry_opacity", f(1.0)),
+        Mapped::Input("geometry_normal", None),
+    ],
+    extra: &[],
+    silent: &[],
+    unsupported: &[
+        ("base_diffuse_roughness", &[0.0]),
+        ("specular_roughness_anisotropy", &[0.0]),
+        ("transmission_depth", &[0.0]),
+        ("transmission_scatter", &[0.0]),
+        ("transmission_scatter_anisotropy", &[0.0]),
+        ("transmission_dispersion_scale", &[0.0]),
+        ("transmission_dispersion_abbe_number", &[20.0]),
+        ("subsurface_weight", &[0.0]),
+        ("subsurface_color", &[0.8]),
+        ("subsurface_radius", &[1.0]),
+        ("subsurface_radius_scale", &[1.0, 0.5, 0.25]),
+        ("subsurface_scatter_anisotropy", &[0.0]),
+        ("fuzz_weight", &[0.0]),
+        ("fuzz_color", &[1.0]),
+        ("fuzz_roughness", &[0.5]),
+        ("coat_weight", &[0.0]),
+        ("coat_color", &[1.0]),
+        ("coat_roughness", &[0.0]),
+        ("coat_roughness_anisotropy", &[0.0]),
+        ("coat_ior", &[1.6]),
+        ("coat_darkening", &[1.0]),
+        ("thin_film_weight", &[0.0]),
+        ("thin_film_thickness", &[0.5]),
+        ("thin_film_ior", &[1.4]),
+        ("emission_luminance", &[0.0]),
+        ("emission_color", &[1.0]),
+        ("geometry_thin_walled", &[0.0]),
+    ],
+};
+
+/// Khronos glTF PBR (`gltf_pbr`). Defaults: the `ND_gltf_pbr_surfaceshader` nodedef of MaterialX's
+/// `libraries/bxdf/gltf_pbr.mtlx` and the glTF table of the 1.39 PBR specification: white base
+/// colour, fully metallic, roughness 1, IOR 1.5, no transmission, specular 1 with white colour,
+/// alpha 1 with `alpha_mode` 0 (OPAQUE) and `alpha_cutoff` 0.5.
+///
+/// Mapping: `base` is 1 (glTF has no base weight); `metallic` → `metalness`, `roughness` →
+/// `specular_roughness`, `ior` → `specular_IOR`; glTF tints its refraction lobe by
+/// `base_color`, so `base_color` is also `transmission_color`. The opacity follows the
+/// definition's own graph: OPAQUE (0) ignores `alpha` (opacity 1), MASK (1) is 1 where
+/// `alpha ≥ alpha_cutoff` and 0 elsewhere, any other mode (BLEND, 2) is `alpha` itself. A MASK
+/// of a graph-driven `alpha` is an `ifgreatereq` node added to the graph (output
+/// `<shader>.alpha_mask`), so it is filtered like any node: over a footprint it is the
+/// probability that `alpha` reaches the cutoff, a smooth step of the footprint's width, and the
+/// hard step at a point.
+///
+/// The dielectric specular layer keeps the BSDF's exact Fresnel of `ior` where glTF uses
+/// Schlick's curve, and its metal reads `specular`/`specular_color` as the edge tint where glTF's
+/// metal uses a white one: close, not identical. `occlusion` (baked ambient occlusion, which a
+/// path tracer computes), and the volume inputs `thickness`, `attenuation_distance`,
+/// `attenuation_color` and `dispersion` are part of the interface that MaterialX's own graph
+/// does not use either, so they are ignored without a warning.
+const GLTF_PBR: ShadingModel = ShadingModel {
+    category: "gltf_pbr",
+    map: &[
+        Mapped::Fixed(ValueType::Float, 1.0),
+        Mapped::Input("base_color", c3(1.0)),
+        Mapped::Input("metallic", f(1.0)),
+        Mapped::Input("specular", f(1.0)),
+        Mapped::Input("specular_color", c3(1.0)),
+        Mapped::Input("roughness", f(1.0)),
+        Mapped::Input("ior", f(1.5)),
+        Mapped::Input("transmission", f(0.0)),
+        Mapped::Input("base_color", c3(1.0)),
+        Mapped::GltfOpacity,
+        Mapped::Input("normal", None),
+    ],
+    extra: &[
+        ("alpha", f(1.0)),
+        ("alpha_mode", Some((ValueType::Integer, [0.0, 0.0, 0.0]))),
+        ("alpha_cutoff", f(0.5)),
+    ],
+    silent: &["occlusion", "thickness", "attenuation_distance", "attenuation_color", "dispersion"],
+    unsupported: &[
+        ("iridescence", &[0.0]),
+        ("iridescence_ior", &[1.3]),
+        ("iridescence_thickness", &[100.0]),
+        ("sheen_color", &[0.0]),
+        ("sheen_roughness", &[0.0]),
+        ("clearcoat", &[0.0]),
+        ("clearcoat_roughness", &[0.0]),
+        ("emissive", &[0.0]),
+        ("emissive_strength", &[1.0]),
+        ("anisotropy_strength", &[0.0]),
+        ("anisotropy_rotation", &[0.0]),
+    ],
+};
+
+const MODELS: &[&ShadingModel] = &[&STANDARD_SURFACE, &OPEN_PBR_SURFACE, &GLTF_PBR];
+
+// Every model maps every supported input (checked when compiling).
+const _: () = {
+    let mut k = 0;
+    while k < MODELS.len() {
+        assert!(MODELS[k].map.len() == SUPPORTED_INPUTS.len());
+        k += 1;
+    }
+};
+
+fn model_of(category: &str) -> Option<&'static ShadingModel> {
+    MODELS.iter().copied().find(|m| m.category == category)
+}
+
+impl ShadingModel {
+    /// The model's own default of its input `input`, if the binding knows it.
+    fn default_of(&self, input: &str) -> Option<InputDefault> {
+        for (k, m) in self.map.iter().enumerate() {
+            match *m {
+                Mapped::Same if SUPPORTED_INPUTS[k].0 == input => return Some(SUPPORTED_INPUTS[k].1),
+                Mapped::Input(n, d) if n == input => return Some(d),
+                _ => {}
+            }
+        }
+        self.extra.iter().find(|(n, _)| *n == input).map(|(_, d)| *d)
+    }
+
+    /// Whether the binding reads input `input` (or deliberately leaves it out).
+    fn handles(&self, input: &str) -> bool {
+        self.map.iter().enumerate().any(|(k, m)| match *m {
+            Mapped::Same => SUPPORTED_INPUTS[k].0 == input,
+            Mapped::Input(n, _) => n == input,
+            _ => false,
+        }) || self.extra.iter().any(|(n, _)| *n == input)
+            || self.silent.contains(&input)
+    }
+}
+
+/// glTF's `alpha_mode` from its input (0 when unset; a non-constant one is an error the
+/// caller reports, read as 0).
+fn gltf_alpha_mode(si: Option<&ShaderInput>) -> Result<i32, String> {
+    match si {
+        Some(ShaderInput::Value(Some(v))) => Ok(v.v[0].round() as i32),
+        Some(ShaderInput::Output(_)) => Err("`alpha_mode` must be a constant; read as 0 (OPAQUE)".into()),
+        _ => Ok(0),
+    }
+}
+
+/// glTF's `alpha_cutoff` from its input (0.5 when unset; a non-constant one is an error the
+/// caller reports, read as 0.5).
+fn gltf_alpha_cutoff(si: Option<&ShaderInput>) -> Result<f32, String> {
+    match si {
+        Some(ShaderInput::Value(Some(v))) => Ok(v.v[0]),
+        Some(ShaderInput::Output(_)) => Err("`alpha_cutoff` must be a constant; read as 0.5".into()),
+        _ => Ok(0.5),
+    }
+}
+
+/// Derived values a shader's binding needs, built into the graph at load.
+#[derive(Clone, Debug, Default)]
+struct ShaderExtras {
+    /// `gltf_pbr` in MASK mode with a graph-driven `alpha`: the `ifgreatereq` output.
+    alpha_mask: Option<Result<OutputId, String>>,
+}
 
 #[derive(Clone, Debug)]
 struct ShaderDef {
     name: String,
     category: String,
     inputs: Vec<(String, ShaderInput)>,
+    extras: ShaderExtras,
     location: Location,
 }
 
@@ -275,58 +516,129 @@ impl Document {
         self.shader_outputs.contains(name)
     }
 
-    /// Names of the `surfacematerial`s, then of `standard_surface` shaders.
+    /// Names of the `surfacematerial`s, then of the shaders of the [`SHADING_MODELS`].
     pub fn material_names(&self) -> Vec<&str> {
         self.materials
             .iter()
             .map(|(m, _)| m.as_str())
-            .chain(self.shaders.iter().filter(|s| s.category == "standard_surface").map(|s| s.name.as_str()))
+            .chain(self.shaders.iter().filter(|s| model_of(&s.category).is_some()).map(|s| s.name.as_str()))
             .collect()
     }
 
-    /// The binding of material (or shader) `name`.
+    /// The binding of material (or shader) `name`, whose shader must be one of the
+    /// [`SHADING_MODELS`]. Its inputs carry `standard_surface`'s names whatever the model:
+    /// each comes from the model's corresponding input (`open_pbr_surface`'s `base_metalness`,
+    /// `gltf_pbr`'s `metallic` for `metalness`, ...), or takes that model's own default when
+    /// unset (an `open_pbr_surface` left at its defaults has roughness 0.3, a `gltf_pbr` is a
+    /// rough white metal). Inputs the renderer does not honour that are set to anything but the
+    /// model's default are named together in one warning.
     pub fn material(&self, name: &str) -> Option<MaterialBinding> {
         let shader_name = self.materials.iter().find(|(m, _)| m == name).map(|(_, s)| s.as_str()).unwrap_or(name);
-        let sh = self.shaders.iter().find(|s| s.name == shader_name && s.category == "standard_surface")?;
+        let (sh, model) = self
+            .shaders
+            .iter()
+            .filter(|s| s.name == shader_name)
+            .find_map(|s| model_of(&s.category).map(|m| (s, m)))?;
+        let lookup = |n: &str| sh.inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
+        let mut warnings: Vec<String> = Vec::new();
+        let read = |n: &str, def: InputDefault, warnings: &mut Vec<String>| match lookup(n) {
+            Some(ShaderInput::Value(Some(v))) => MaterialSource::Constant(*v),
+            Some(ShaderInput::Output(Ok(o))) => MaterialSource::Output(*o),
+            Some(ShaderInput::Output(Err(reason))) => {
+                warnings.push(format!("{}: input `{n}` is not available: {reason}", sh.location));
+                default_source(def)
+            }
+            _ => default_source(def),
+        };
         let mut inputs = Vec::new();
-        let mut warnings = Vec::new();
-        for &(iname, def) in SUPPORTED_INPUTS {
-            let src = match sh.inputs.iter().find(|(n, _)| n == iname).map(|(_, s)| s) {
-                Some(ShaderInput::Value(Some(v))) => MaterialSource::Constant(*v),
-                Some(ShaderInput::Output(Ok(o))) => MaterialSource::Output(*o),
-                Some(ShaderInput::Output(Err(reason))) => {
-                    warnings.push(format!("{}: input `{iname}` is not available: {reason}", sh.location));
-                    default_source(def)
-                }
-                _ => default_source(def),
+        for (&(cname, cdef), mapped) in SUPPORTED_INPUTS.iter().zip(model.map) {
+            let src = match *mapped {
+                Mapped::Same => read(cname, cdef, &mut warnings),
+                Mapped::Input(n, def) => read(n, def, &mut warnings),
+                Mapped::Fixed(ty, v) => MaterialSource::Constant(Value::new(ty, &[v])),
+                Mapped::GltfOpacity => self.gltf_opacity(sh, &mut warnings, &read),
             };
-            inputs.push((iname, src));
+            inputs.push((cname, src));
         }
+        let mut ignored = Vec::new();
         for (iname, si) in &sh.inputs {
-            if SUPPORTED_INPUTS.iter().any(|(n, _)| n == iname) {
+            if model.handles(iname) {
                 continue;
             }
-            let default = UNSUPPORTED_DEFAULTS.iter().find(|(n, _)| n == iname).map(|(_, d)| *d);
+            let default = model.unsupported.iter().find(|(n, _)| n == iname).map(|(_, d)| *d);
             let differs = match si {
                 ShaderInput::Output(_) => true,
-                ShaderInput::Value(Some(v)) => {
-                    default.is_none_or(|d| v.channels().iter().any(|c| (*c - d).abs() > 1e-6))
-                }
+                ShaderInput::Value(Some(v)) => default.is_none_or(|d| {
+                    v.channels().iter().enumerate().any(|(k, c)| (*c - d[k.min(d.len() - 1)]).abs() > 1e-6)
+                }),
                 ShaderInput::Value(None) => false,
             };
             if differs {
-                warnings
-                    .push(format!("{}: standard_surface input `{iname}` is not supported and is ignored", sh.location));
+                ignored.push(format!("`{iname}`"));
             }
         }
-        Some(MaterialBinding { name: name.to_string(), shader: sh.name.clone(), inputs, warnings })
+        if !ignored.is_empty() {
+            let (noun, verb) = if ignored.len() == 1 { ("input", "is") } else { ("inputs", "are") };
+            warnings.push(format!(
+                "{}: {} {noun} {} {verb} not supported and {verb} ignored",
+                sh.location,
+                model.category,
+                ignored.join(", ")
+            ));
+        }
+        // glTF reads `base_color` twice (base and transmission tint): say a problem once.
+        let mut seen = HashSet::new();
+        warnings.retain(|w| seen.insert(w.clone()));
+        Some(MaterialBinding { name: name.to_string(), shader: sh.name.clone(), model: model.category, inputs, warnings })
+    }
+
+    /// A `gltf_pbr`'s opacity, as its definition's graph computes it from `alpha`,
+    /// `alpha_mode` and `alpha_cutoff` (see [`GLTF_PBR`]).
+    fn gltf_opacity(
+        &self,
+        sh: &ShaderDef,
+        warnings: &mut Vec<String>,
+        read: &dyn Fn(&str, InputDefault, &mut Vec<String>) -> MaterialSource,
+    ) -> MaterialSource {
+        let lookup = |n: &str| sh.inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
+        let opaque = MaterialSource::Constant(Value::float(1.0));
+        let mode = gltf_alpha_mode(lookup("alpha_mode")).unwrap_or_else(|w| {
+            warnings.push(format!("{}: {w}", sh.location));
+            0
+        });
+        match mode {
+            0 => opaque,
+            1 => {
+                if matches!(lookup("alpha"), Some(ShaderInput::Output(Ok(_)))) {
+                    return match &sh.extras.alpha_mask {
+                        Some(Ok(o)) => MaterialSource::Output(*o),
+                        Some(Err(reason)) => {
+                            warnings.push(format!("{}: input `alpha` is not available: {reason}", sh.location));
+                            opaque
+                        }
+                        None => opaque,
+                    };
+                }
+                let cutoff = gltf_alpha_cutoff(lookup("alpha_cutoff")).unwrap_or_else(|w| {
+                    warnings.push(format!("{}: {w}", sh.location));
+                    0.5
+                });
+                let alpha = match read("alpha", f(1.0), warnings) {
+                    MaterialSource::Constant(v) => v.v[0],
+                    _ => 1.0,
+                };
+                MaterialSource::Constant(Value::float(if alpha >= cutoff { 1.0 } else { 0.0 }))
+            }
+            _ => read("alpha", f(1.0), warnings),
+        }
     }
 
     /// Input `input` of a shader of any category, with the type it delivers: `material` names a
     /// material (then `shader`, if given, must be its shader) or a shader. `None` if there is no
     /// such shader; `Err` with the reason if the input cannot be evaluated. An input left unset
-    /// takes its default for `standard_surface` ([`MaterialSource::Geometric`] for `normal`) and
-    /// is an error for other shaders (their defaults are not known here).
+    /// takes its model's default for the [`SHADING_MODELS`] when the binding knows it (the
+    /// inputs it reads; [`MaterialSource::Geometric`] for normals) and is an error otherwise
+    /// (other shaders' defaults are not known here).
     pub fn shader_input(
         &self,
         material: &str,
@@ -344,19 +656,10 @@ impl Document {
             None => return None,
         };
         let sh = self.shaders.iter().find(|s| s.name == sname)?;
-        let standard_default = || {
-            SUPPORTED_INPUTS.iter().find(|(n, _)| *n == input).map(|(_, d)| match d {
-                Some((ty, v)) => (MaterialSource::Constant(Value::new(*ty, &v[..ty.channels()])), *ty),
-                None => (MaterialSource::Geometric, ValueType::Vector3),
-            })
-        };
-        let unset = || {
-            if sh.category == "standard_surface" {
-                if let Some(d) = standard_default() {
-                    return Ok(d);
-                }
-            }
-            Err(format!("input `{input}` of `{}` ({}) is not set", sh.name, sh.category))
+        let unset = || match model_of(&sh.category).and_then(|m| m.default_of(input)) {
+            Some(Some((ty, v))) => Ok((MaterialSource::Constant(Value::new(ty, &v[..ty.channels()])), ty)),
+            Some(None) => Ok((MaterialSource::Geometric, ValueType::Vector3)),
+            None => Err(format!("input `{input}` of `{}` ({}) is not set", sh.name, sh.category)),
         };
         Some(match sh.inputs.iter().find(|(n, _)| n == input).map(|(_, s)| s) {
             Some(ShaderInput::Value(Some(v))) => Ok((MaterialSource::Constant(*v), v.ty)),
@@ -1266,8 +1569,13 @@ impl<'a, 'i> Importer<'a, 'i> {
                 };
                 inputs.push((iname, si));
             }
+            let extras = if category == "gltf_pbr" {
+                ShaderExtras { alpha_mask: self.gltf_alpha_mask(scope, el, &sname, &inputs)? }
+            } else {
+                ShaderExtras::default()
+            };
             let location = self.loc(el);
-            self.shaders.push(ShaderDef { name: sname, category, inputs, location });
+            self.shaders.push(ShaderDef { name: sname, category, inputs, extras, location });
         }
         for el in self.material_elems.clone() {
             let mname = self.name_of(el)?.to_string();
@@ -1280,6 +1588,52 @@ impl<'a, 'i> Importer<'a, 'i> {
             }
         }
         Ok(())
+    }
+
+    /// For a `gltf_pbr` in MASK mode whose `alpha` is connected: adds `ifgreatereq(alpha,
+    /// alpha_cutoff, 1, 0)` to the graph as output `<shader>.alpha_mask` (a shader-input
+    /// output) and returns it; `None` for other modes and for constant alphas, which
+    /// [`Document::material`] thresholds itself.
+    fn gltf_alpha_mask(
+        &mut self,
+        scope: usize,
+        el: XNode<'a, 'i>,
+        sname: &str,
+        inputs: &[(String, ShaderInput)],
+    ) -> Result<Option<Result<OutputId, String>>, LoadError> {
+        let lookup = |n: &str| inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
+        if gltf_alpha_mode(lookup("alpha_mode")) != Ok(1) || !matches!(lookup("alpha"), Some(ShaderInput::Output(Ok(_))))
+        {
+            return Ok(None);
+        }
+        let cutoff = gltf_alpha_cutoff(lookup("alpha_cutoff")).unwrap_or(0.5);
+        let Some(inp) = self.inputs_of(el).into_iter().find(|i| i.attribute("name") == Some("alpha")) else {
+            return Ok(None);
+        };
+        let src = match self.input_source(scope, inp) {
+            Ok(Some(s)) => s,
+            Ok(None) => return Ok(Some(Err("unconnected".into()))),
+            Err(Fail::Soft(ix)) => return Ok(Some(Err(self.reason(&ix)))),
+            Err(Fail::Hard(e)) => return Err(e),
+        };
+        let name = qualify(&self.scopes[scope].prefix, &format!("{sname}.alpha_mask"));
+        let one = |v: f32| Source::Constant(Value::float(v));
+        let node = match self.builder.add_node(
+            &name,
+            "ifgreatereq",
+            ValueType::Float,
+            &[("value1", src), ("value2", one(cutoff)), ("in1", one(1.0)), ("in2", one(0.0))],
+            Vec::new(),
+        ) {
+            Ok(id) => id,
+            Err(e) => return Ok(Some(Err(e.to_string()))),
+        };
+        self.shader_outputs.insert(name.clone());
+        let out = self
+            .builder
+            .add_output(&name, ValueType::Float, Source::Node { node, channel: None })
+            .map_err(|e| self.err(inp, e.into()))?;
+        Ok(Some(Ok(out)))
     }
 
     /// Parses a value of type `ty` given on `el`: numbers, or a custom nodedef's enum name;
