@@ -8,11 +8,11 @@
 use crate::camera::CameraRay;
 use crate::film::Image;
 use crate::geometry::{interaction, Ray, SurfaceInteraction};
-use crate::math::{max_component, Spectrum};
-use crate::pathfootprint::{vertex_of, FootprintMode, PathFootprint};
+use crate::math::{max_component, Frame, Spectrum};
+use crate::pathfootprint::{shadow_scatter, vertex_of, FootprintMode, PathFootprint};
 use crate::sampling::Rng;
 use crate::scene::Scene;
-use crate::shading::ShadeScratch;
+use crate::shading::{Material, ShadeScratch};
 use crate::texture::ShadeContext;
 use footprint::Vertex;
 use glam::{DMat2, Mat2, Vec2, Vec3};
@@ -348,8 +348,131 @@ fn mis(a: f32, b: f32) -> f32 {
     }
 }
 
+/// Most surfaces a ray passes straight through in a row (partial opacity). A camera or bounce
+/// ray that would pass through more ends its path there, and a shadow ray crossing more is
+/// taken as blocked: the only bias is on rays that cross more than this many partly
+/// transparent layers between two scattering events, and it bounds the work should a ray ever
+/// re-hit the surface it left.
+pub const MAX_PASS_THROUGH: u32 = 128;
+
+/// The distance along a ray past its hit at `t` (point `si`) from which a ray passing straight
+/// through resumes. The ray keeps its origin and direction, so whatever lies behind is hit at
+/// exactly the distance (and point) it would be without the surface; the step of one
+/// [`ray_epsilon`] skips the surface itself, including a mesh's neighbouring triangles at a
+/// shared edge.
+#[inline]
+fn past(si: &SurfaceInteraction, t: f32) -> f32 {
+    t + ray_epsilon(si.p)
+}
+
+/// The material's graph outputs at hit `si`, filtered over the uv footprint that `var` (the
+/// tangent-plane covariance at `vertex`) gives there; a point without a vertex, the means with
+/// `--free-textures`, nothing for a material without graphs.
+fn material_outputs<'a>(
+    scene: &'a Scene,
+    settings: &RenderSettings,
+    shade: &'a mut ShadeScratch,
+    material: &'a Material,
+    si: &SurfaceInteraction,
+    vertex: Option<&Vertex>,
+    var: DMat2,
+) -> &'a [graph::Filtered] {
+    if material.graphs.is_empty() {
+        &[]
+    } else if settings.free_textures {
+        &material.constant_outputs
+    } else {
+        let cov = match vertex {
+            Some(v) => footprint::uv_covariance(var, v).as_mat2() * settings.filter_scale_squared(),
+            None => Mat2::ZERO,
+        };
+        shade.evaluate(&scene.graphs, material, &crate::shading::footprint_at(si, cov))
+    }
+}
+
+/// The material's BSDF at a hit and the shading frame it is evaluated in (bent by a
+/// graph-driven normal).
+fn shade_bsdf(material: &Material, si: &SurfaceInteraction, ctx: &ShadeContext) -> (crate::bsdf::Bsdf, Frame) {
+    let bsdf = material.bsdf.at(ctx);
+    let frame = match material.normal_slot {
+        Some(slot) => {
+            let f = &ctx.outputs[slot as usize];
+            crate::shading::perturbed_frame(&si.sh, Vec3::new(f.ch[0].mean, f.ch[1].mean, f.ch[2].mean))
+        }
+        None => si.sh,
+    };
+    (bsdf, frame)
+}
+
+/// What a shadow ray lets through: 0 when an opaque surface blocks it, otherwise the product of
+/// `1 − o` over the partly transparent surfaces it crosses (deterministically: no surface is
+/// sampled as blocking, so next-event estimation stays unbiased). Each opacity is evaluated
+/// filtered over the footprint the path would carry there, had its BSDF sampled the light's
+/// direction (`from`: the path's footprint state at the shading point, its vertex and
+/// [`shadow_scatter`]'s record; a point without it).
+fn transmittance(
+    scene: &Scene,
+    settings: &RenderSettings,
+    shade: &mut ShadeScratch,
+    mut shadow: Ray,
+    from: Option<(&PathFootprint, &Vertex, &crate::bsdf::BsdfSample)>,
+) -> Spectrum {
+    if !scene.masked {
+        return if scene.accel.occluded(&scene.shapes, &shadow) { Spectrum::ZERO } else { Spectrum::ONE };
+    }
+    let mut tr = Spectrum::ONE;
+    for _ in 0..MAX_PASS_THROUGH {
+        let Some(hit) = scene.accel.intersect(&scene.shapes, &shadow) else {
+            return tr;
+        };
+        let material = &scene.materials[scene.shapes[hit.shape as usize].material as usize];
+        if !material.bsdf.is_masked() {
+            return Spectrum::ZERO;
+        }
+        let si = interaction(&scene.shapes, &shadow, &hit);
+        let (vertex, var) = match from {
+            Some((fp, cur, bs)) if !material.graphs.is_empty() => {
+                let v = vertex_of(&si);
+                let mut state = *fp;
+                let var = state.advance(cur, bs, shadow.d, &v);
+                (Some(v), var)
+            }
+            _ => (None, DMat2::ZERO),
+        };
+        let outputs = material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var);
+        tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
+        if max_component(tr) <= 0.0 {
+            return Spectrum::ZERO;
+        }
+        shadow.tmin = past(&si, hit.t);
+        if !(shadow.tmin < shadow.tmax) {
+            return tr;
+        }
+    }
+    // As many surfaces crossed as a path may pass through: anything more blocks.
+    if scene.accel.occluded(&scene.shapes, &shadow) {
+        Spectrum::ZERO
+    } else {
+        tr
+    }
+}
+
 /// Incident radiance along a camera ray (Mitsuba's `path` integrator), with the path's
 /// footprints tracked by `settings.footprint` and reported to `obs`.
+///
+/// Partly transparent surfaces ([`crate::bsdf::BsdfDesc::Mask`], opacity `o` per channel) are
+/// the BSDF with weight `o` plus a straight pass-through with weight `1 − o`. A camera or
+/// bounce ray picks one at random, the BSDF with probability `p` = the mean of `o`, and weighs
+/// the path by `o/p` or `(1 − o)/(1 − p)` per channel (no random number is drawn when `p` is 0
+/// or 1). Passing through continues the same ray past the hit: it is not a bounce (depth,
+/// Russian roulette and the MIS state of the last scattering vertex are untouched) and it
+/// leaves the path's footprint as if the surface were absent; the opacity itself is filtered
+/// over the current ray's footprint projected onto the surface. At most [`MAX_PASS_THROUGH`]
+/// pass-throughs in a row. Shadow rays are attenuated by `1 − o` of every such surface they
+/// cross ([`transmittance`]). For MIS, the BSDF strategy's density at a partly transparent
+/// vertex is `p` times the BSDF's (what the mixture samples), both at emitter hits and in
+/// next-event estimation. Emission of a partly transparent emitter is not masked (Mitsuba's
+/// emitters are separate from their shape's BSDF).
 pub fn radiance<O: PathObserver>(
     scene: &Scene,
     settings_r: RenderSettings,
@@ -379,6 +502,8 @@ pub fn radiance<O: PathObserver>(
     let mut fp = PathFootprint::None;
     let mut prev_vertex: Option<Vertex> = None;
     let mut prev_bs: Option<crate::bsdf::BsdfSample> = None;
+    // Surfaces passed straight through since the last scattering vertex.
+    let mut passes = 0u32;
     loop {
         counts.rays += 1;
         let hit = scene.accel.intersect(&scene.shapes, &ray);
@@ -398,17 +523,21 @@ pub fn radiance<O: PathObserver>(
         };
         let si = interaction(&scene.shapes, &ray, &hit);
         let shape = &scene.shapes[si.shape as usize];
+        let material = &scene.materials[shape.material as usize];
         let vertex = if track { Some(vertex_of(&si)) } else { None };
-        let var = match (&vertex, &prev_vertex, &prev_bs) {
+        // The footprint here, carried from the last scattering vertex (or the camera) along this
+        // ray; the path keeps it only if it scatters here.
+        let (fp_here, var) = match (&vertex, &prev_vertex, &prev_bs) {
             (Some(v), None, _) => {
-                let (state, var) = PathFootprint::start(settings_r.footprint, &scene.camera, cam, v, settings_r.spp);
-                fp = state;
-                var
+                PathFootprint::start(settings_r.footprint, &scene.camera, cam, v, settings_r.spp)
             }
-            (Some(v), Some(pv), Some(bs)) => fp.advance(pv, bs, ray.d, v),
-            _ => DMat2::ZERO,
+            (Some(v), Some(pv), Some(bs)) => {
+                let mut state = fp;
+                let var = state.advance(pv, bs, ray.d, v);
+                (state, var)
+            }
+            _ => (fp, DMat2::ZERO),
         };
-        obs.hit(depth, &si, vertex.as_ref(), var);
         if let Some(ei) = shape.emitter {
             let e = &scene.emitters[ei as usize];
             if let crate::emitter::Emitter::Area { radiance, .. } = e {
@@ -422,30 +551,48 @@ pub fn radiance<O: PathObserver>(
                 }
             }
         }
+        // Partial opacity: scatter here (probability `p`) or pass straight through.
+        let mut scatter_pdf = 1.0f32;
+        let mut shaded = None;
+        if material.bsdf.is_masked() {
+            let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var);
+            let ctx = ShadeContext { uv: si.uv, outputs };
+            let o = material.bsdf.opacity(&ctx);
+            let p = (o.x + o.y + o.z) / 3.0;
+            let scatter = p >= 1.0 || (p > 0.0 && rng.next_f32() < p);
+            if !scatter {
+                throughput *= (Spectrum::ONE - o) / (1.0 - p);
+                passes += 1;
+                if passes > MAX_PASS_THROUGH || max_component(throughput) <= 0.0 {
+                    break;
+                }
+                ray.tmin = past(&si, hit.t);
+                continue;
+            }
+            if p < 1.0 {
+                throughput *= o / p;
+                scatter_pdf = p;
+            }
+            shaded = Some(shade_bsdf(material, &si, &ctx));
+        }
+        passes = 0;
+        fp = fp_here;
+        obs.hit(depth, &si, vertex.as_ref(), var);
         if depth + 1 >= settings.max_depth {
             obs.event(depth, if shape.emitter.is_some() { Event::Emit } else { Event::Absorb }, 0.0, 1.0);
             break;
         }
-        let material = &scene.materials[shape.material as usize];
-        let outputs: &[graph::Filtered] = if material.graphs.is_empty() {
-            &[]
-        } else if settings_r.free_textures {
-            &material.constant_outputs
-        } else {
-            // Procedural textures are filtered to the vertex's uv footprint (a point without one).
-            let cov = match &vertex {
-                Some(v) => footprint::uv_covariance(var, v).as_mat2() * settings_r.filter_scale_squared(),
-                None => Mat2::ZERO,
-            };
-            shade.evaluate(&scene.graphs, material, &crate::shading::footprint_at(&si, cov))
+        let (bsdf, frame) = match shaded {
+            Some(s) => s,
+            None => {
+                // Procedural textures are filtered to the vertex's uv footprint (a point without one).
+                let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var);
+                shade_bsdf(material, &si, &ShadeContext { uv: si.uv, outputs })
+            }
         };
-        let bsdf = material.bsdf.at(&ShadeContext { uv: si.uv, outputs });
         // A graph-driven shading normal bends the frame the BSDF is evaluated in.
         let mut si = si;
-        if let Some(slot) = material.normal_slot {
-            let f = &outputs[slot as usize];
-            si.sh = crate::shading::perturbed_frame(&si.sh, Vec3::new(f.ch[0].mean, f.ch[1].mean, f.ch[2].mean));
-        }
+        si.sh = frame;
         let wi = si.sh.to_local(-ray.d);
 
         // Next-event estimation.
@@ -462,10 +609,18 @@ pub fn radiance<O: PathObserver>(
                         shadow.tmax = es.dist - ray_epsilon(si.p + es.wi * es.dist) - (shadow.o - si.p).length();
                     }
                     counts.shadow_rays += 1;
-                    if shadow.tmax > 0.0 && !scene.accel.occluded(&scene.shapes, &shadow) {
-                        let light_pdf = select_pdf * es.pdf;
-                        let w = if es.delta { 1.0 } else { mis(light_pdf, bsdf.pdf(wi, wo)) };
-                        result += throughput * f * es.value * (w / light_pdf);
+                    if shadow.tmax > 0.0 {
+                        let toward = match (&vertex, scene.masked) {
+                            (Some(v), true) => Some((v, shadow_scatter(&bsdf, wi, wo))),
+                            _ => None,
+                        };
+                        let from = toward.as_ref().map(|(v, bs)| (&fp, *v, bs));
+                        let tr = transmittance(scene, &settings_r, shade, shadow, from);
+                        if max_component(tr) > 0.0 {
+                            let light_pdf = select_pdf * es.pdf;
+                            let w = if es.delta { 1.0 } else { mis(light_pdf, scatter_pdf * bsdf.pdf(wi, wo)) };
+                            result += throughput * f * es.value * tr * (w / light_pdf);
+                        }
                     }
                 }
             }
@@ -492,7 +647,7 @@ pub fn radiance<O: PathObserver>(
         throughput *= bs.weight;
         eta *= bs.eta;
         prev_p = si.p;
-        prev_pdf = bs.pdf;
+        prev_pdf = bs.pdf * scatter_pdf;
         prev_delta = matches!(bs.kind, crate::bsdf::LobeKind::Specular);
         ray = spawn_ray(&si, si.sh.to_world(bs.wo));
         depth += 1;

@@ -159,6 +159,7 @@ impl Builder {
         }
         let accel: Box<dyn crate::geometry::Intersector> = Box::new(Accel::build(&self.shapes));
         let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
+        let masked = self.materials.iter().any(|m| m.bsdf.is_masked());
         for (k, mg) in self.materials.iter_mut().flat_map(|m| m.graphs.iter_mut()).enumerate() {
             mg.stream = k as u32;
         }
@@ -178,6 +179,7 @@ impl Builder {
             seed,
             // Procedural graphs are filtered by footprint; Mitsuba's bitmaps are not mip-mapped.
             footprints_needed,
+            masked,
         })
     }
 
@@ -525,10 +527,26 @@ impl Builder {
                     _ => return Err(obj.error("twosided with a different BSDF on each side is not supported; give one nested <bsdf>")),
                 }
             }
+            "mask" => {
+                // Mitsuba's default opacity is 0.5; a texture may drive it (`<texture name="opacity">`).
+                let opacity = self.texture_param(obj, "opacity", Vec3::splat(0.5))?;
+                let inner = match obj.children("bsdf").as_slice() {
+                    [b] => self.bsdf(b)?,
+                    [] => return Err(obj.error("mask needs one nested <bsdf>")),
+                    [_, b, ..] => return Err(b.error("mask takes one nested <bsdf>")),
+                };
+                let opaque = matches!(&opacity, Texture::Constant(_))
+                    && opacity.eval_float(&crate::texture::ShadeContext::uv(Vec2::ZERO)) >= 1.0;
+                if opaque {
+                    inner
+                } else {
+                    BsdfDesc::Mask { opacity, scalar: true, bsdf: Box::new(inner) }
+                }
+            }
             "mtlx" => self.mtlx_material(obj)?,
             other => {
                 return Err(obj.error(format!(
-                    "unknown bsdf '{other}' (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided, mtlx)"
+                    "unknown bsdf '{other}' (supported: diffuse, conductor, roughconductor, dielectric, roughdielectric, twosided, mask, mtlx)"
                 )))
             }
         };
@@ -670,8 +688,10 @@ impl Builder {
         m
     }
 
-    /// `<bsdf type="mtlx">`: a MaterialX `standard_surface` material, its inputs constants or
-    /// graph outputs.
+    /// `<bsdf type="mtlx">`: a MaterialX `standard_surface`, `open_pbr_surface` or `gltf_pbr`
+    /// material (the document maps the latter two onto `standard_surface`'s inputs; see
+    /// [`graph::Document::material`]), its inputs constants or graph outputs, inside a
+    /// [`BsdfDesc::Mask`] when its opacity is not 1.
     fn mtlx_material(&mut self, obj: &Object) -> Result<BsdfDesc> {
         let file = obj.opt_string("filename")?.ok_or_else(|| obj.error("mtlx bsdf needs a 'filename'"))?;
         let name = obj.opt_string("material")?.ok_or_else(|| obj.error("mtlx bsdf needs a 'material' name"))?;
@@ -712,27 +732,24 @@ impl Builder {
             transmission: input(self, "transmission", Vec3::ZERO)?,
             transmission_color: input(self, "transmission_color", Vec3::ONE)?,
         };
-        // Inputs tessera does not render: say so once, naming them.
-        let mut ignored = Vec::new();
-        if let Some(src) = binding.get("opacity") {
-            let opaque = matches!(src, graph::MaterialSource::Constant(v) if v.channels().iter().all(|&x| x == 1.0));
-            if !opaque {
-                ignored.push("opacity");
-            }
-        }
+        // Opacity below 1 (constant or from a graph): the BSDF inside a mask, which the
+        // integrator renders as partial pass-through. An opaque material keeps the bare BSDF.
+        let opaque = match binding.get("opacity") {
+            Some(graph::MaterialSource::Constant(v)) => v.channels().iter().all(|&x| x >= 1.0),
+            Some(graph::MaterialSource::Output(_)) => false,
+            _ => true,
+        };
+        let desc = if opaque {
+            desc
+        } else {
+            BsdfDesc::Mask { opacity: input(self, "opacity", Vec3::ONE)?, scalar: false, bsdf: Box::new(desc) }
+        };
         if let Some(graph::MaterialSource::Output(out)) = binding.get("normal") {
             let g_out = *out;
             match self.graph_texture(obj, g, g_out, false)? {
                 Texture::GraphOutput { slot, scalar: false } => self.pending_normal = Some(slot),
                 _ => return Err(obj.error(format!("material '{name}': its normal input must be a vector3 output"))),
             }
-        }
-        if !ignored.is_empty() {
-            eprintln!(
-                "warning: {}: material '{name}' sets {} which tessera does not render yet; rendered as opaque",
-                obj.loc,
-                ignored.join(" and ")
-            );
         }
         Ok(desc)
     }

@@ -7,7 +7,7 @@
 //! [`footprint::Footprint`]: the 2×2 tangent-plane covariance, the world 3×3 `T Σ Tᵀ` and the uv
 //! covariance.
 
-use crate::bsdf::{BsdfSample, LobeKind};
+use crate::bsdf::{lobe_alpha, Bsdf, BsdfModel, BsdfSample, LobeKind};
 use crate::camera::{Camera, CameraRay};
 use crate::geometry::SurfaceInteraction;
 use footprint::{
@@ -65,6 +65,42 @@ pub fn scatter_of(bs: &BsdfSample) -> Scatter {
     } else {
         Scatter::Reflection
     }
+}
+
+/// The scattering record a BSDF sample toward `wo` would carry, for the footprint a shadow ray
+/// from this vertex carries onto the partly transparent surfaces it crosses (next-event
+/// estimation picks `wo` by the light, so there is no sample): reflection or refraction by the
+/// sides of `wi` and `wo`, the interface's IOR ratio on refraction, and the roughness of the
+/// BSDF's roughest lobe (1 where it has a diffuse part). A texture seen through the shadow ray is
+/// so filtered at least as widely as along any path the BSDF could sample toward the light.
+pub fn shadow_scatter(bsdf: &Bsdf, wi: Vec3, wo: Vec3) -> BsdfSample {
+    let transmitted = wi.z * wo.z < 0.0;
+    let (alpha, eta) = match &bsdf.model {
+        BsdfModel::Diffuse(_) => (1.0, 1.0),
+        BsdfModel::RoughConductor(b) => (lobe_alpha(&b.distribution), 1.0),
+        BsdfModel::RoughDielectric(b) => (lobe_alpha(&b.distribution), b.eta),
+        BsdfModel::StandardSurface(b) => {
+            let p = b.params();
+            let diffuse = p.metalness < 1.0 && p.transmission < 1.0;
+            (if diffuse { 1.0 } else { lobe_alpha(b.distribution()) }, p.specular_ior)
+        }
+        // Delta BSDFs: next-event estimation never traces shadow rays from them.
+        BsdfModel::Conductor(_) => (0.0, 1.0),
+        BsdfModel::Dielectric(b) => (0.0, b.eta),
+    };
+    let eta = match (transmitted, wi.z >= 0.0) {
+        (false, _) => 1.0,
+        (true, true) => eta,
+        (true, false) => 1.0 / eta,
+    };
+    let kind = if alpha >= 1.0 {
+        LobeKind::Diffuse
+    } else if alpha > 0.0 {
+        LobeKind::Glossy
+    } else {
+        LobeKind::Specular
+    };
+    BsdfSample { wo, weight: Vec3::ONE, pdf: 1.0, kind, transmitted, eta, alpha }
 }
 
 /// A footprint estimator's state along one camera path (no allocation; one lives on the stack
@@ -136,5 +172,34 @@ impl PathFootprint {
             }
             PathFootprint::None => DMat2::ZERO,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::{Diffuse, Microfacet, MicrofacetKind, RoughDielectric};
+
+    #[test]
+    fn shadow_scatter_describes_the_light_direction_with_the_roughest_lobe() {
+        let up = Vec3::new(0.3, 0.1, 0.9).normalize();
+        let down = Vec3::new(-0.2, 0.4, -0.8).normalize();
+        let diffuse = Bsdf::new(BsdfModel::Diffuse(Diffuse { reflectance: Vec3::splat(0.5) }));
+        let s = shadow_scatter(&diffuse, up, up);
+        assert_eq!((s.alpha, s.kind, s.transmitted, s.eta, s.wo), (1.0, LobeKind::Diffuse, false, 1.0, up));
+        let glass = Bsdf::new(BsdfModel::RoughDielectric(RoughDielectric {
+            distribution: Microfacet::new(MicrofacetKind::Beckmann, 0.2, 0.2),
+            eta: 1.5,
+            specular_reflectance: Vec3::ONE,
+            specular_transmittance: Vec3::ONE,
+        }));
+        // Reflection keeps η = 1; refraction enters (η) or leaves (1/η) by the side of wi.
+        let r = shadow_scatter(&glass, up, up);
+        assert_eq!((r.kind, r.transmitted, r.eta), (LobeKind::Glossy, false, 1.0));
+        assert!((r.alpha - 0.2).abs() < 1e-6, "{}", r.alpha);
+        let t = shadow_scatter(&glass, up, down);
+        assert_eq!((t.transmitted, t.eta), (true, 1.5));
+        let t = shadow_scatter(&glass, down, up);
+        assert_eq!((t.transmitted, t.eta), (true, 1.0 / 1.5));
     }
 }

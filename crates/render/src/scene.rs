@@ -42,4 +42,8 @@ pub struct Scene {
     /// Whether any material filters its textures by the path footprint (then every camera path
     /// tracks footprints; otherwise only when an AOV or `tessera footprint` asks).
     pub footprints_needed: bool,
+    /// Whether any material is partly transparent ([`crate::bsdf::BsdfDesc::Mask`]): then
+    /// shadow rays gather the transmittance of the surfaces they cross instead of stopping at
+    /// the first.
+    pub masked: bool,
 }

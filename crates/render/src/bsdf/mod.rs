@@ -301,6 +301,18 @@ pub enum BsdfDesc {
     },
     /// Mitsuba `twosided`: the nested BSDF on both faces.
     TwoSided(Box<BsdfDesc>),
+    /// Partial opacity (Mitsuba's `mask`, MaterialX's `opacity`): the surface is the nested BSDF
+    /// with weight `o` and a straight pass-through with weight `1 − o`. [`BsdfDesc::at`] gives
+    /// the nested BSDF; the integrator makes the pass-through (see [`crate::integrator`]).
+    Mask {
+        /// The opacity `o`, clamped to [0, 1] per channel.
+        opacity: Texture,
+        /// Read `opacity` as one value (its luminance for a colour texture), as Mitsuba's
+        /// `mask` does; otherwise per channel (MaterialX's colour `opacity`).
+        scalar: bool,
+        /// What the opaque part is.
+        bsdf: Box<BsdfDesc>,
+    },
 }
 
 impl Default for BsdfDesc {
@@ -315,6 +327,7 @@ impl BsdfDesc {
     pub fn at(&self, ctx: &ShadeContext) -> Bsdf {
         let model = match self {
             BsdfDesc::TwoSided(inner) => return inner.at(ctx).two_sided(),
+            BsdfDesc::Mask { bsdf, .. } => return bsdf.at(ctx),
             BsdfDesc::Diffuse { reflectance } => BsdfModel::Diffuse(Diffuse { reflectance: reflectance.eval(ctx) }),
             BsdfDesc::Conductor { eta, k, specular_reflectance } => BsdfModel::Conductor(Conductor {
                 eta: *eta,
@@ -379,12 +392,35 @@ impl BsdfDesc {
     /// True if the evaluated BSDF will have a non-delta lobe (see [`Bsdf::has_smooth`]).
     pub fn has_smooth(&self) -> bool {
         match self {
-            BsdfDesc::TwoSided(inner) => inner.has_smooth(),
+            BsdfDesc::TwoSided(inner) | BsdfDesc::Mask { bsdf: inner, .. } => inner.has_smooth(),
             BsdfDesc::Diffuse { .. }
             | BsdfDesc::RoughConductor { .. }
             | BsdfDesc::RoughDielectric { .. }
             | BsdfDesc::StandardSurface { .. } => true,
             BsdfDesc::Conductor { .. } | BsdfDesc::Dielectric { .. } => false,
+        }
+    }
+
+    /// True if the surface is (possibly) partly transparent: a [`BsdfDesc::Mask`], at any depth.
+    pub fn is_masked(&self) -> bool {
+        match self {
+            BsdfDesc::Mask { .. } => true,
+            BsdfDesc::TwoSided(inner) => inner.is_masked(),
+            _ => false,
+        }
+    }
+
+    /// The opacity at the shading point, per channel in [0, 1] (NaN → 0): the product of the
+    /// nested masks' opacities, 1 without a mask.
+    pub fn opacity(&self, ctx: &ShadeContext) -> Spectrum {
+        match self {
+            BsdfDesc::Mask { opacity, scalar, bsdf } => {
+                let o = if *scalar { Spectrum::splat(opacity.eval_float(ctx)) } else { opacity.eval(ctx) };
+                // `max` first maps NaN to 0.
+                o.max(Spectrum::ZERO).min(Spectrum::ONE) * bsdf.opacity(ctx)
+            }
+            BsdfDesc::TwoSided(inner) => inner.opacity(ctx),
+            _ => Spectrum::ONE,
         }
     }
 }
@@ -452,4 +488,38 @@ pub fn dielectric_ior_preset(name: &str) -> Option<f32> {
         "diamond" => 2.419,
         _ => return None,
     })
+}
+
+#[cfg(test)]
+mod mask_tests {
+    use super::*;
+
+    fn mask(o: Spectrum, scalar: bool, inner: BsdfDesc) -> BsdfDesc {
+        BsdfDesc::Mask { opacity: Texture::Constant(o), scalar, bsdf: Box::new(inner) }
+    }
+
+    #[test]
+    fn masks_clamp_multiply_and_leave_the_bsdf_to_the_nested_one() {
+        let ctx = ShadeContext::uv(Vec2::ZERO);
+        let bare = BsdfDesc::default();
+        assert!(!bare.is_masked());
+        assert_eq!(bare.opacity(&ctx), Spectrum::ONE);
+        // Per channel (MaterialX), clamped to [0, 1], NaN read as 0.
+        let m = mask(Spectrum::new(-0.5, f32::NAN, 2.0), false, bare.clone());
+        assert!(m.is_masked());
+        assert_eq!(m.opacity(&ctx), Spectrum::new(0.0, 0.0, 1.0));
+        // Scalar (Mitsuba's mask): the luminance of a colour.
+        let c = Spectrum::new(0.2, 0.4, 0.6);
+        let s = mask(c, true, bare.clone()).opacity(&ctx);
+        assert!((s - Spectrum::splat(crate::math::luminance(c))).abs().max_element() < 1e-7);
+        // Nested masks multiply, also through twosided; the BSDF is the innermost one.
+        let nested = BsdfDesc::TwoSided(Box::new(mask(
+            Spectrum::splat(0.5),
+            true,
+            mask(Spectrum::new(0.2, 0.4, 1.0), false, bare.clone()),
+        )));
+        assert!(nested.is_masked() && nested.has_smooth());
+        assert_eq!(nested.opacity(&ctx), Spectrum::new(0.1, 0.2, 0.5));
+        assert_eq!(nested.at(&ctx), bare.at(&ctx).two_sided());
+    }
 }
