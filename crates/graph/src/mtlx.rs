@@ -31,7 +31,8 @@
 //!   attributes and `swizzle` nodes become channel picks and `combineN` nodes; `<material>`
 //!   elements with `<shaderref>`s become shader bindings; a `normalmap` in `object` space becomes
 //!   `normalize(2·in − 1)`, and a tangent-space one drops its unbound `normal`/`tangent`/
-//!   `bitangent` literals. Rules for nodes the library does not evaluate (BSDFs, `switch`,
+//!   `bitangent` literals; a five-input `switch` feeds its fifth input to 1.39's sixth to tenth,
+//!   so that `which` ≥ 4 still picks it. Rules for nodes the library does not evaluate (BSDFs,
 //!   `artistic_ior`, ...) do not apply: those nodes are reported unsupported. Versions after 1.39
 //!   and before 1.36 are errors.
 //! - **Includes**: top-level `xi:include href="..."` elements are read (relative to the including
@@ -2356,6 +2357,16 @@ impl<'a, 'i> Importer<'a, 'i> {
         };
         if !soft.is_empty() {
             return Err(Fail::Soft(soft));
+        }
+        // Before 1.39 a switch had five inputs, the fifth taken from `which` ≥ 4 on; 1.39 has
+        // ten. Feeding the fifth's source to the new five keeps the old choice.
+        if category == "switch" && self.version(el) < (1, 39) {
+            let fifth = inputs.iter().find(|(n, _)| *n == "in5").map(|(_, s)| s.clone());
+            let fifth = fifth.unwrap_or_else(|| Source::Constant(Value::splat(ty, 0.0)));
+            for name in ["in6", "in7", "in8", "in9", "in10"] {
+                inputs.retain(|(n, _)| *n != name);
+                inputs.push((name, fifth.clone()));
+            }
         }
         let id = match self.builder.add_node(q, category, ty, &inputs, params) {
             Ok(id) => id,

@@ -76,3 +76,89 @@ fn logic_nodes_match_truth_tables_and_supersampling() {
         }
     }
 }
+
+/// A `switch` over ten constants of distinct values, `which = 12 u − 1` (so every interval,
+/// including the open-ended first and last, is crossed along u).
+fn switch_doc(version: &str, n_inputs: usize, which_type: &str) -> Document {
+    let ins: String = (1..=n_inputs)
+        .map(|k| format!(r#"<input name="in{k}" type="float" value="{}"/>"#, (k * k) as f32 * 0.1))
+        .collect();
+    let which = if which_type == "integer" {
+        // An integer `which` from a float: MaterialX's `floor` to integer.
+        r#"<floor name="wi" type="integer"><input name="in" type="float" nodename="w"/></floor>
+           <switch name="r" type="float">{INS}<input name="which" type="integer" nodename="wi"/></switch>"#
+    } else {
+        r#"<switch name="r" type="float">{INS}<input name="which" type="float" nodename="w"/></switch>"#
+    };
+    let text = format!(
+        r#"<?xml version="1.0"?>
+<materialx version="{version}">
+  <nodegraph name="g">
+    <texcoord name="t" type="vector2"/>
+    <extract name="u" type="float"><input name="in" type="vector2" nodename="t"/><input name="index" type="integer" value="0"/></extract>
+    <multiply name="m" type="float"><input name="in1" type="float" nodename="u"/><input name="in2" type="float" value="12"/></multiply>
+    <subtract name="w" type="float"><input name="in1" type="float" nodename="m"/><input name="in2" type="float" value="1"/></subtract>
+    {}
+    <output name="out" type="float" nodename="r"/>
+  </nodegraph>
+</materialx>"#,
+        which.replace("{INS}", &ins)
+    );
+    Document::parse(&text, "switch.mtlx".as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The unfiltered switch: input k (1-based) for `which < k`, the last otherwise; `count`
+/// inputs as written (1.38: five; 1.39: ten).
+fn switch_pick(which: f64, count: usize) -> f64 {
+    let k = (1..count).find(|&k| which < k as f64).unwrap_or(count);
+    (k * k) as f64 * 0.1
+}
+
+#[test]
+fn switch_picks_by_interval_and_filters_to_the_mixture() {
+    for (version, count, which_type) in [("1.39", 10, "float"), ("1.39", 10, "integer"), ("1.38", 5, "float")] {
+        let d = switch_doc(version, count, which_type);
+        let g = d.graph();
+        let out = g.output_id("g/out").expect("output");
+        let mut scratch = EvalScratch::new(g);
+        for i in 0..400 {
+            let u = -0.1 + 1.2 * i as f32 / 399.0;
+            let which = (u * 12.0 - 1.0) as f64;
+            let which = if which_type == "integer" { which.floor() } else { which };
+            let got = g.eval_output(out, &Footprint::point(Vec2::new(u, 0.5)), &mut scratch).ch[0].mean as f64;
+            let want = switch_pick(which, count);
+            assert!((got - want).abs() < 1e-6, "{version} {which_type} at u = {u}: {got} vs {want}");
+        }
+        if which_type == "integer" {
+            // floor's filtered form is its own approximation; the float case checks the mixture.
+            continue;
+        }
+        // Over a footprint: the Gaussian average of the picks (a fine quadrature over ±6σ).
+        for (cx, sx) in [(0.3f32, 0.002f32), (0.25, 0.03), (0.5, 0.1), (0.9, 0.2), (0.04, 0.05)] {
+            let fp = Footprint::new(Vec2::new(cx, 0.5), Mat2::from_diagonal(Vec2::new(sx * sx, 1e-4)));
+            let f = g.eval_output(out, &fp, &mut scratch).ch[0];
+            let n = 4001;
+            let (mut e, mut e2, mut total) = (0.0, 0.0, 0.0);
+            for j in 0..n {
+                let z = -6.0 + 12.0 * j as f64 / (n - 1) as f64;
+                let w = (-0.5 * z * z).exp();
+                let u = cx as f64 + sx as f64 * z;
+                let y = switch_pick(u * 12.0 - 1.0, count);
+                e += w * y;
+                e2 += w * y * y;
+                total += w;
+            }
+            let (e, var) = (e / total, e2 / total - (e / total).powi(2));
+            assert!((f.mean as f64 - e).abs() < 2e-3 * (1.0 + e.abs()), "{version} at {cx} σ {sx}: mean {} vs {e}", f.mean);
+            assert!((f.var as f64 - var).abs() < 2e-3 * (1.0 + var), "{version} at {cx} σ {sx}: var {} vs {var}", f.var);
+            // The uv gradient of the mean, against a central difference of the filtered mean.
+            let h = 1e-3f32;
+            let at = |c: f32, s: &mut EvalScratch| {
+                let fp = Footprint::new(Vec2::new(c, 0.5), Mat2::from_diagonal(Vec2::new(sx * sx, 1e-4)));
+                g.eval_output(out, &fp, s).ch[0].mean as f64
+            };
+            let fd = (at(cx + h, &mut scratch) - at(cx - h, &mut scratch)) / (2.0 * h as f64);
+            assert!((f.grad.x as f64 - fd).abs() < 1e-2 * (1.0 + fd.abs()), "{version} at {cx} σ {sx}: ∂u {} vs {fd}", f.grad.x);
+        }
+    }
+}

@@ -19,6 +19,7 @@
 //! | `dotproduct`, `magnitude`, `distance`, `normalize` | vectors | exact for a uniform operand of `dotproduct`; cubature otherwise |
 //! | `and`, `or`, `xor`, `not` | booleans `in1`, `in2` (false) / `in` (false) | a boolean's mean is the probability that it is true over the footprint; the operands are taken as independent: `p1 p2`, `p1 + p2 − p1 p2`, `p1 + p2 − 2 p1 p2`, `1 − p` (exact at points) |
 //! | `ifgreater`, `ifgreatereq`, `ifequal` | `value1` (1), `value2` (0), `in1` (0), `in2` (0) | `mix(in2, in1, P(value1 > value2))` with the probability from the difference's Gaussian; boolean variants output the probability itself |
+//! | `switch` | `in1` … `in10` (0), `which` (0; float or integer) | at a point, `in1` for `which < 1`, `in2` for `which < 2`, …, `in10` otherwise (MaterialX's code generators); over a footprint, the mixture `Σ P_k in_k` with `P_k` the Gaussian mass of `which` in the k-th interval, and the mixture's variance |
 //!
 //! Cubature and Hermite rules treat channels as Gaussian and independent; at Σ = 0 every rule
 //! reduces to the plain function of the inputs.
@@ -71,6 +72,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "normalize",
     "ifgreater",
     "ifgreatereq",
+    "switch",
     "ifequal",
 ];
 
@@ -147,6 +149,8 @@ pub enum MathOp {
     Normalize,
     /// ifgreater
     IfGreater,
+    /// switch
+    Switch,
     /// ifgreatereq
     IfGreaterEq,
     /// ifequal
@@ -222,6 +226,22 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             ],
             types::numeric,
         ),
+        "switch" => (
+            &[
+                inp!("in1", Out, Zero),
+                inp!("in2", Out, Zero),
+                inp!("in3", Out, Zero),
+                inp!("in4", Out, Zero),
+                inp!("in5", Out, Zero),
+                inp!("in6", Out, Zero),
+                inp!("in7", Out, Zero),
+                inp!("in8", Out, Zero),
+                inp!("in9", Out, Zero),
+                inp!("in10", Out, Zero),
+                inp!("which", Scalar, Zero),
+            ],
+            types::numeric,
+        ),
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
@@ -266,6 +286,7 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "distance" => Distance,
         "normalize" => Normalize,
         "ifgreater" => IfGreater,
+        "switch" => Switch,
         "ifgreatereq" => IfGreaterEq,
         "and" => And,
         "or" => Or,
@@ -511,7 +532,7 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
             }
         }
         Mix => mix(x[1], a, x[2], fp),
-        IfGreater | IfGreaterEq | IfEqual | And | Or | Xor | Not => {
+        IfGreater | IfGreaterEq | IfEqual | Switch | And | Or | Xor | Not => {
             unreachable!("conditionals and logic are evaluated per node")
         }
         Dot | Magnitude | Distance | Normalize => unreachable!("vector ops are evaluated per node"),
@@ -566,6 +587,53 @@ fn condition(op: MathOp, v1: Moments, v2: Moments, fp: &Footprint, integral: boo
     }
 }
 
+/// `switch`: input `k` (0-based) is chosen on `k ≤ which < k + 1`, the first below 1 and the
+/// last from 9 on. Over a footprint, `which ~ N(m, s²)` picks input `k` with the Gaussian mass
+/// `P_k` of its interval, so the result is the mixture `Σ P_k in_k` (`which` taken independent
+/// of the inputs): its mean, its variance `Σ P_k (σ_k² + μ_k²) − mean²`, and its gradient
+/// `Σ P_k ∇μ_k + μ_k ∇P_k`. At a point (`s` = 0) it is the plain pick.
+fn switch(which: Moments, ins: &[Filtered], ty: ValueType, out: &mut Filtered) {
+    let last = ins.len() - 1;
+    let (m, s) = (which.mean as f64, which.sigma() as f64);
+    if s == 0.0 {
+        // NaN picks the last input, as the generated `if (which < k)` chain does.
+        let k = (0..last).find(|&k| m < (k + 1) as f64).unwrap_or(last);
+        for c in 0..ty.channels() {
+            out.ch[c] = ins[k].at(c);
+        }
+        return;
+    }
+    let mut mean = [0.0f64; 4];
+    let mut sq = [0.0f64; 4];
+    let mut grad = [Vec2::ZERO; 4];
+    let mut below = (0.0, 0.0); // (Φ, φ) at the interval's lower edge
+    for (k, input) in ins.iter().enumerate() {
+        let above = if k == last {
+            (1.0, 0.0)
+        } else {
+            let z = ((k + 1) as f64 - m) / s;
+            (gaussian::cdf(z), gaussian::pdf(z))
+        };
+        let p = (above.0 - below.0).max(0.0);
+        // dP/dm = (φ(z_lo) − φ(z_hi)) / s.
+        let dp = (below.1 - above.1) / s;
+        below = above;
+        if p == 0.0 && dp == 0.0 {
+            continue;
+        }
+        for c in 0..ty.channels() {
+            let x = input.at(c);
+            let mu = x.mean as f64;
+            mean[c] += p * mu;
+            sq[c] += p * (x.var as f64 + mu * mu);
+            grad[c] += x.grad * p as f32 + which.grad * (dp * mu) as f32;
+        }
+    }
+    for c in 0..ty.channels() {
+        out.ch[c] = Moments { mean: mean[c] as f32, grad: grad[c], var: (sq[c] - mean[c] * mean[c]).max(0.0) as f32 };
+    }
+}
+
 fn vector_op(op: MathOp, ins: &[Filtered], fp: &Footprint) -> Filtered {
     let mut out = Filtered::zero(ValueType::Float);
     let a = &ins[0];
@@ -613,6 +681,7 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                 });
             }
         }
+        MathOp::Switch => switch(ins[10].ch[0], &ins[..10], ty, &mut out),
         MathOp::And | MathOp::Or | MathOp::Xor | MathOp::Not => {
             out.ch[0] = logic(*op, &ins[0].ch[0], ins.get(1).map(|i| &i.ch[0]));
             return out;
