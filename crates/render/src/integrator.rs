@@ -89,16 +89,29 @@ pub struct RenderSettings {
 ///
 /// Filtering each sample over the whole footprint (σ = ½ px at the first hit, the paper's pixel
 /// filter) blurs on top of the pixel filter that the samples already integrate, so the image
-/// converges to a slightly blurrier one than point sampling would. `Auto` narrows the texture
-/// filter as samples accumulate, as pbrt-v4 does with its ray differentials: scale
-/// `max(1/8, 1/√spp)`, so few samples get strong anti-aliasing and many converge to the
-/// point-sampled image. Footprints themselves (AOVs, `tessera footprint`) are never scaled.
+/// converges to a blurrier one than point sampling would, at every sample count. `Auto` (the
+/// default) narrows the texture filter as samples accumulate, as pbrt-v4 does with its ray
+/// differentials: a pixel's `spp` samples cover its filter evenly
+/// ([`crate::sampling::pixel_sample`]), so each stands for about `1/spp` of it and filters over
+/// the footprint scaled by `max(1/8, 1/√spp)`. Few samples get strong anti-aliasing and many
+/// converge to the point-sampled image. Footprints themselves (path statistics, AOVs,
+/// `tessera footprint`) are never scaled.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FilterScale {
     /// A fixed scale of the footprint's standard deviation (1 = the paper's footprint).
     Fixed(f32),
     /// `max(1/8, 1/√spp)`.
     Auto,
+}
+
+impl FilterScale {
+    /// The scale of the footprint's standard deviation for a render of `spp` samples per pixel.
+    pub fn at(self, spp: u32) -> f32 {
+        match self {
+            FilterScale::Fixed(s) => s,
+            FilterScale::Auto => (1.0 / (spp.max(1) as f32).sqrt()).max(0.125),
+        }
+    }
 }
 
 impl std::str::FromStr for FilterScale {
@@ -118,16 +131,14 @@ impl RenderSettings {
     /// The factor applied to uv covariances before textures are filtered.
     #[inline]
     pub fn filter_scale_squared(&self) -> f32 {
-        let s = match self.filter_scale {
-            FilterScale::Fixed(s) => s,
-            FilterScale::Auto => (1.0 / (self.spp.max(1) as f32).sqrt()).max(0.125),
-        };
+        let s = self.filter_scale.at(self.spp);
         s * s
     }
 }
 
 impl RenderSettings {
-    /// `spp` samples with `seed` and the default (covariance) footprints.
+    /// `spp` samples with `seed`, the default (covariance) footprints and the default
+    /// ([`FilterScale::Auto`]) texture filter.
     pub fn new(spp: u32, seed: u64) -> Self {
         RenderSettings {
             spp,
@@ -135,7 +146,7 @@ impl RenderSettings {
             footprint: FootprintMode::default(),
             footprint_aov_density: None,
             free_textures: false,
-            filter_scale: FilterScale::Fixed(1.0),
+            filter_scale: FilterScale::Auto,
         }
     }
 }
@@ -293,6 +304,17 @@ fn render_pixel_aov(
     (l, Spectrum::from_array(lods))
 }
 
+/// Camera sample `s` of pixel (`x`, `y`) in a render seeded by `seed`: its ray, through the film
+/// point the pixel filter warps [`crate::sampling::pixel_sample`] to (so a pixel's samples
+/// cover its filter evenly), and the random stream its path draws from. Every renderer entry
+/// point (render, profiling, `tessera footprint`) takes its samples from here, so they agree.
+pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
+    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
+    let offset = scene.rfilter.warp(crate::sampling::pixel_sample(seed, pixel_index, u64::from(s)));
+    let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
+    (scene.camera.generate_ray(film), Rng::for_sample(seed, pixel_index, u64::from(s)))
+}
+
 /// Mean radiance of one pixel over `settings.spp` samples, reporting every path to `obs`.
 pub fn render_pixel_with<O: PathObserver>(
     scene: &Scene,
@@ -303,13 +325,9 @@ pub fn render_pixel_with<O: PathObserver>(
     shade: &mut ShadeScratch,
     obs: &mut O,
 ) -> Spectrum {
-    let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
     let mut sum = Spectrum::ZERO;
     for s in 0..settings.spp {
-        let mut rng = Rng::for_sample(settings.seed, pixel_index, s as u64);
-        let offset = scene.rfilter.sample(|| rng.next_f32());
-        let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
-        let cam = scene.camera.generate_ray(film);
+        let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
         let l = radiance(scene, settings, &cam, &mut rng, counts, shade, obs);
         counts.samples += 1;
         if l.is_finite() {

@@ -196,12 +196,8 @@ fn profile_pixel(
     shade: &mut ShadeScratch,
     warm: &mut Warm,
 ) {
-    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
     for s in 0..settings.spp + extra {
-        let mut rng = crate::sampling::Rng::for_sample(settings.seed, pixel_index, u64::from(s));
-        let offset = scene.rfilter.sample(|| rng.next_f32());
-        let film = glam::Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
-        let cam = scene.camera.generate_ray(film);
+        let (cam, mut rng) = crate::integrator::camera_sample(scene, settings.seed, x, y, s);
         let tap = shade.tap.as_mut().expect("profiling");
         tap.exact = s > 0;
         let before = tap.exact_eval_ns;

@@ -10,7 +10,6 @@ use glam::{Vec2, Vec3};
 use render::film::Image;
 use render::geometry::SurfaceInteraction;
 use render::integrator::{radiance, render, FilterScale, PathObserver, RenderCounts, RenderSettings, MAX_PASS_THROUGH};
-use render::sampling::Rng;
 use render::scene::Scene;
 use render::shading::ShadeScratch;
 use std::path::{Path, PathBuf};
@@ -367,10 +366,8 @@ impl PathObserver for Footprints {
     }
 }
 
-fn trace(scene: &Scene, x: u32, y: u32, sample: u64) -> Footprints {
-    let mut rng = Rng::for_sample(7, (y * scene.camera.width + x) as u64, sample);
-    let offset = scene.rfilter.sample(|| rng.next_f32());
-    let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset);
+fn trace(scene: &Scene, x: u32, y: u32, sample: u32) -> Footprints {
+    let (cam, mut rng) = render::integrator::camera_sample(scene, 7, x, y, sample);
     let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
     let mut obs = Footprints::default();
     radiance(scene, RenderSettings::new(1, 7), &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut obs);

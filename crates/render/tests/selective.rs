@@ -6,7 +6,7 @@
 use plan::profile::SceneId;
 use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, Target};
 use render::caching::{NodeCache, Strategy};
-use render::integrator::{render_cached, RenderSettings};
+use render::integrator::{render_cached, FilterScale, RenderSettings};
 use render::profiling::{profile, ProfileOptions};
 use render::scene::Scene;
 use std::path::PathBuf;
@@ -17,9 +17,12 @@ fn scene(name: &str, res: u32) -> Scene {
     render::loader::load_file(&scenes.join(name), &defines).unwrap_or_else(|e| panic!("{e}"))
 }
 
-fn take_profile(scene: &Scene, fraction: f64) -> Profile {
+/// A one-sample profile for a final render of `final_spp` samples per pixel: with that render's
+/// texture filter width (the default, `auto`, depends on the sample count).
+fn take_profile(scene: &Scene, fraction: f64, final_spp: u32) -> Profile {
+    let scale = FilterScale::Auto.at(final_spp);
     let opts = ProfileOptions {
-        settings: RenderSettings::new(1, 77),
+        settings: RenderSettings { filter_scale: FilterScale::Fixed(scale), ..RenderSettings::new(1, 77) },
         pixel_fraction: fraction,
         warm_fraction: 0.25,
         scene: SceneId { name: "test".into(), hash: "0".into() },
@@ -71,7 +74,7 @@ fn predictions_match_measured_counts_and_bytes() {
     let mut failures = Vec::new();
     for (name, res, spp) in [("marble.xml", 64, 16), ("brick_moss.xml", 48, 16)] {
         let scene = scene(name, res);
-        let profile = take_profile(&scene, 0.5);
+        let profile = take_profile(&scene, 0.5, spp);
         let samples = u64::from(scene.camera.width * scene.camera.height * spp);
         assert!(profile.render.samples * 20 < samples, "the profile should be a small share of the render");
         let target = Target { samples, threads: rayon::current_num_threads() as u32 };
@@ -110,8 +113,8 @@ fn predictions_match_measured_counts_and_bytes() {
 #[test]
 fn plans_fit_their_budget() {
     let scene = scene("marble.xml", 48);
-    let profile = take_profile(&scene, 0.3);
     let spp = 8;
+    let profile = take_profile(&scene, 0.3, spp);
     let target = Target { samples: u64::from(48 * 48 * spp), threads: 2 };
     let model = Model::new(&profile, target).unwrap();
     let all_bytes = model.predict(&PlanSpec::all(&profile)).peak_bytes;
@@ -132,7 +135,7 @@ fn plans_fit_their_budget() {
 #[test]
 fn local_search_matches_exhaustive_search_on_a_small_graph() {
     let scene = scene("marble.xml", 32);
-    let mut profile = take_profile(&scene, 0.5);
+    let mut profile = take_profile(&scene, 0.5, 64);
     // Keep 10 cacheable nodes so that all 1024 subsets can be enumerated.
     let mut kept = 0;
     for g in &mut profile.graphs {
@@ -162,7 +165,7 @@ fn local_search_matches_exhaustive_search_on_a_small_graph() {
 #[test]
 fn bad_profiles_and_plans_are_rejected() {
     let scene = scene("marble.xml", 16);
-    let profile = take_profile(&scene, 1.0);
+    let profile = take_profile(&scene, 1.0, 1);
     let json = profile.to_json();
     assert!(Profile::from_json(&json).is_ok());
     let cases = [

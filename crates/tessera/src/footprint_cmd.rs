@@ -12,11 +12,10 @@
 use crate::{load_scene, parse_defines};
 use anyhow::{bail, Result};
 use footprint::Vertex;
-use glam::{DMat2, Vec2, Vec3};
+use glam::{DMat2, Vec3};
 use render::geometry::SurfaceInteraction;
 use render::integrator::{radiance, Event, PathObserver, RenderCounts, RenderSettings};
 use render::pathfootprint::FootprintMode;
-use render::sampling::Rng;
 use serde_json::{json, Value};
 use std::path::PathBuf;
 
@@ -103,10 +102,7 @@ pub fn run(args: FootprintArgs) -> Result<()> {
     let seed = args.seed.unwrap_or(scene.seed);
     let settings = RenderSettings { footprint: args.footprint, ..RenderSettings::new(scene.spp, seed) };
     // Sample 0 of this pixel, with the same stream and filter offset as `tessera render`.
-    let pixel_index = y as u64 * scene.camera.width as u64 + x as u64;
-    let mut rng = Rng::for_sample(seed, pixel_index, 0);
-    let offset = scene.rfilter.sample(|| rng.next_f32());
-    let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset);
+    let (cam, mut rng) = render::integrator::camera_sample(&scene, seed, x, y, 0);
     let mut rec = Recorder { density: args.density, vertices: Vec::new() };
     let mut shade = render::shading::ShadeScratch::new(&scene.graphs, &scene.materials);
     let l = radiance(&scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut rec);

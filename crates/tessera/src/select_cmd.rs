@@ -39,9 +39,15 @@ pub struct ProfileArgs {
     /// Override a scene <default>: -D name=value (repeatable).
     #[arg(short = 'D', value_name = "NAME=VALUE")]
     define: Vec<String>,
-    /// Texture filter width relative to the footprint (as for render).
-    #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<FilterScale>())]
+    /// Texture filter width relative to the footprint (as for render); `auto` is resolved for the
+    /// final render's sample count, `--final-spp`.
+    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<FilterScale>())]
     filter_scale: FilterScale,
+    /// Samples per pixel of the final render the profile is for (default: the scene's): sets
+    /// the texture filter width under `--filter-scale auto`, so that the profile sees the
+    /// footprints that render will filter with.
+    #[arg(long)]
+    final_spp: Option<u32>,
     /// Where to write the profile.
     #[arg(long, default_value = "profile.json")]
     out: PathBuf,
@@ -123,7 +129,13 @@ pub fn auto_profile_settings(scene: &Scene, final_settings: RenderSettings, shar
     let spp = (want / pixels as f64).ceil().max(1.0) as u32;
     let fraction = (want / (pixels as f64 * f64::from(spp))).min(1.0);
     // A different seed: the profile's samples are not the final render's.
-    let settings = RenderSettings { spp, seed: final_settings.seed ^ 0x005E_ED0F_F11E, ..final_settings };
+    // The final render's texture filter width (an `auto` scale depends on the sample count).
+    let settings = RenderSettings {
+        spp,
+        seed: final_settings.seed ^ 0x005E_ED0F_F11E,
+        filter_scale: FilterScale::Fixed(final_settings.filter_scale.at(final_settings.spp)),
+        ..final_settings
+    };
     (settings, fraction)
 }
 
@@ -290,8 +302,12 @@ pub fn run_profile(args: ProfileArgs) -> Result<()> {
     let id = scene_id(args.scene.as_deref(), &defines)?;
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build()?;
+    let final_spp = args.final_spp.unwrap_or(scene.spp);
+    if final_spp == 0 || final_spp > 1 << 16 {
+        bail!("--final-spp must be between 1 and 65536, got {final_spp}");
+    }
     let settings = RenderSettings {
-        filter_scale: args.filter_scale,
+        filter_scale: FilterScale::Fixed(args.filter_scale.at(final_spp)),
         footprint: FootprintMode::default(),
         ..RenderSettings::new(args.spp, args.seed.unwrap_or(scene.seed))
     };
