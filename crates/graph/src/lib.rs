@@ -2,7 +2,7 @@
 //!
 //! A [`Graph`] is an immutable DAG of typed MaterialX nodes (float, vector2/3/4, color3/4)
 //! with named outputs, usually loaded from a `.mtlx` file by [`Document`] (which also exposes
-//! `standard_surface` materials as [`MaterialBinding`]s). [`Graph::eval_output`] evaluates an
+//! `standard_surface`, `open_pbr_surface` and `gltf_pbr` materials as [`MaterialBinding`]s). [`Graph::eval_output`] evaluates an
 //! output at a [`Footprint`] — a uv centre, a 2×2 uv covariance Σ and the surface
 //! [`Geometry`] there (position, frame, ∂P/∂u, ∂P/∂v; MaterialX's flat baking quad unless the
 //! renderer gives one) — and returns a
@@ -24,8 +24,9 @@
 //! | 3D noise (`nodes/noise3d.rs`) | noise3d, fractal3d, cellnoise3d, worleynoise3d, unifiednoise3d | as their 2D counterparts over the position input's per-axis spreads (the surface footprint's 3D marginals): Perlin exact up to σ = 0.25 lattice units per axis, damped beyond, octaves past the band limit dropped; cell noise exact cell masses; Worley Gauss–Hermite then the global mean (of the plane, for a footprint flat along a lattice axis) |
 //! | patterns (`nodes/pattern.rs`) | checkerboard, ramplr, ramptb, ramp4, ramp, splitlr, splittb, randomfloat, randomcolor | closed forms: square-wave expectations (erf sums / damped Fourier series), clamped-ramp moments, piecewise-polynomial moments (`ramp`), step probabilities Φ |
 //! | shapes (`nodes/shape.rs`) | circle, line, hexagon, grid, crosshatch, tiledcircles, tiledhexagons | coverage probabilities: grid closed form (periodic band masses); convex pieces (disk, capsule, hexagon, strips, clipped to cells) by Gauss–Legendre over the footprint's narrow axis of closed-form Φ chord masses along the other; tiled patterns become their coverage beyond 0.6 cells |
-//! | math (`nodes/math.rs`) | add … ifequal (see the file) | exact for linear nodes; closed forms for abs, clamp, min/max, smoothstep, floor/ceil/round/fract/modulo, sign, sin/cos, exp, conditionals; Gauss–Hermite / cubature for the rest |
+//! | math (`nodes/math.rs`) | add … ifequal, switch (see the file) | exact for linear nodes; closed forms for abs, clamp, min/max, smoothstep, floor/ceil/round/fract/modulo, sign, sin/cos, exp, conditionals (`switch`: the Gaussian mixture of its inputs); Gauss–Hermite / cubature for the rest |
 //! | channels (`nodes/channel.rs`) | combine2/3/4, extract, separate2/3/4, convert | exact |
+//! | hex tiling (`nodes/hextile.rs`) | hextiledimage | each of the three blended tiles' lookups as `image` filters them, under the tile's rotation and scale; the blend weights integrated over the footprint at Gauss–Hermite nodes, converging to the image's mean at coarse footprints |
 //! | images (`nodes/image.rs`) | image, tiledimage | PNG (8/16 bit) / EXR, sRGB decoded at load; up to 1 texel the exact Gaussian average of the bilinear reconstruction (closed-form tent integrals), beyond it the same on a mip pyramid at lod = log2 σ, blended between levels; address modes periodic / clamp / mirror / constant (the default blended by the footprint's mass outside) |
 //! | normal maps (`nodes/normal.rs`) | normalmap, heighttonormal | normalmap: cubature (flat tangent frame by default); heighttonormal: the normal of the filtered height's slope (gradients are kept at point footprints for it) |
 //! | colour (`nodes/color.rs`) | luminance, saturate, contrast, rgbtohsv, hsvtorgb, hsvadjust | exact when linear; cubature otherwise |
