@@ -46,29 +46,13 @@ fn errors(g: &Graph, out: OutputId, seed: u64) -> Vec<(f32, f64, f64, f64)> {
             let (uv, cov, l) = footprint(&mut rng, sigma);
             let f = g.eval_output(out, &Footprint::new(uv, cov), &mut scratch);
             let p = g.eval_output(out, &Footprint::point(uv), &mut scratch);
-            let mut acc = [0.0f64; 4];
-            let mut acc2 = [0.0f64; 4];
             let shift = (rng.uniform(), rng.uniform());
-            for s in 0..SAMPLES {
-                // R2 sequence, shifted; Box–Muller to a Gaussian pair.
-                let u1 = (shift.0 + 0.754_877_666_246_692_7 * (s as f64 + 0.5)).fract();
-                let u2 = (shift.1 + 0.569_840_290_998_053_3 * (s as f64 + 0.5)).fract();
-                let r = (-2.0 * u1.max(1e-12).ln()).sqrt();
-                let z = Vec2::new(
-                    (r * (2.0 * std::f64::consts::PI * u2).cos()) as f32,
-                    (r * (2.0 * std::f64::consts::PI * u2).sin()) as f32,
-                );
-                let v = g.eval_output(out, &Footprint::point(uv + l * z), &mut scratch);
-                for k in 0..n {
-                    acc[k] += v.ch[k].mean as f64;
-                    acc2[k] += (v.ch[k].mean as f64).powi(2);
-                }
-            }
+            let (acc, acc2) = common::supersample(g, out, uv, l, shift, SAMPLES, &mut scratch);
             for k in 0..n {
-                let b = acc[k] / SAMPLES as f64;
+                let b = acc[k];
                 ef += (f.ch[k].mean as f64 - b).abs();
                 ep += (p.ch[k].mean as f64 - b).abs();
-                spread += (acc2[k] / SAMPLES as f64 - b * b).max(0.0).sqrt();
+                spread += (acc2[k] - b * b).max(0.0).sqrt();
             }
         }
         let d = (CENTRES * n) as f64;

@@ -62,3 +62,34 @@ impl Rng {
         (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
     }
 }
+
+/// Brute-force Gaussian average of output `out` over `uv + l z`, z ~ N(0, I): `samples` points of
+/// the R2 sequence shifted by `shift`, through Box–Muller. Per channel: (mean, mean square) of
+/// the unfiltered values.
+pub fn supersample(
+    g: &graph::Graph,
+    out: graph::OutputId,
+    uv: glam::Vec2,
+    l: glam::Mat2,
+    shift: (f64, f64),
+    samples: usize,
+    scratch: &mut graph::EvalScratch,
+) -> ([f64; 4], [f64; 4]) {
+    let n = g.output(out).ty.channels();
+    let (mut acc, mut acc2) = ([0.0f64; 4], [0.0f64; 4]);
+    for s in 0..samples {
+        let u1 = (shift.0 + 0.754_877_666_246_692_7 * (s as f64 + 0.5)).fract();
+        let u2 = (shift.1 + 0.569_840_290_998_053_3 * (s as f64 + 0.5)).fract();
+        let r = (-2.0 * u1.max(1e-12).ln()).sqrt();
+        let z = glam::Vec2::new(
+            (r * (2.0 * std::f64::consts::PI * u2).cos()) as f32,
+            (r * (2.0 * std::f64::consts::PI * u2).sin()) as f32,
+        );
+        let v = g.eval_output(out, &graph::Footprint::point(uv + l * z), scratch);
+        for k in 0..n {
+            acc[k] += v.ch[k].mean as f64;
+            acc2[k] += (v.ch[k].mean as f64).powi(2);
+        }
+    }
+    (acc.map(|a| a / samples as f64), acc2.map(|a| a / samples as f64))
+}
