@@ -24,7 +24,7 @@
 use super::hash::{self, cell3_float, cell3_vec3, ifloor};
 use super::noise::{
     axis_terms, fade, gradient3, gradient3_vector, AxisTerms, PatternStats, GRADIENT_SCALE_3D, MAX_AXIS, OCTAVE_CUTOFF,
-    PERLIN_SIGMA_EXACT, PERLIN_SIGMA_POINT,
+    PERLIN_SIGMA_POINT,
 };
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian;
@@ -38,9 +38,13 @@ pub(crate) const CATEGORIES: &[&str] = &["noise3d", "fractal3d", "cellnoise3d", 
 /// Variance of MaterialX's 3D float Perlin noise over space (measured; see the tests).
 pub const PERLIN3_VARIANCE: f64 = 0.0695;
 
-/// Gaussian damping rate of 3D Perlin noise beyond [`PERLIN_SIGMA_EXACT`] per axis (fitted, as
-/// the 2D rate, to the decay of the exactly filtered noise's RMS between σ = 0.25 and 0.45 —
-/// 1.8 to 1.6; see the tests).
+/// Per-axis spread up to which 3D Perlin noise is filtered exactly (lattice units): up to here
+/// the corner sum visits at most 5 coordinates per axis.
+pub const PERLIN3_SIGMA_EXACT: f64 = 0.25;
+
+/// Gaussian damping rate of 3D Perlin noise beyond [`PERLIN3_SIGMA_EXACT`] per axis (fitted to
+/// the decay of the exactly filtered noise's RMS between σ = 0.25 and 0.45 — 1.8 to 1.6; see
+/// the tests).
 pub const PERLIN3_KAPPA: f64 = 1.7;
 
 /// 3D noise operations.
@@ -228,7 +232,7 @@ fn cell_value(c: [i32; 3], k: usize, vector: bool) -> f32 {
 // Filtered 3D Perlin noise.
 
 /// Filtered 3D Perlin noise for up to 4 lattices at once: per channel (value, gradient).
-/// `s` are the per-axis spreads, each in [1e-4, [`PERLIN_SIGMA_EXACT`]].
+/// `s` are the per-axis spreads, each in [1e-4, [`PERLIN3_SIGMA_EXACT`]].
 fn perlin3_exact(p: DVec3, s: DVec3, sels: &[Sel], out: &mut [(f64, DVec3); 4], work: &mut crate::eval::Work) {
     let mut axes = [[(0i32, AxisTerms::default()); MAX_AXIS]; 3];
     let mut n = [0usize; 3];
@@ -297,8 +301,8 @@ fn perlin3_octave(p: DVec3, s: DVec3, sels: &[Sel], offsets: &[DVec3], out: &mut
         return true;
     }
     let damp = |s: f64| {
-        if s > PERLIN_SIGMA_EXACT {
-            (-PERLIN3_KAPPA * (s * s - PERLIN_SIGMA_EXACT * PERLIN_SIGMA_EXACT)).exp()
+        if s > PERLIN3_SIGMA_EXACT {
+            (-PERLIN3_KAPPA * (s * s - PERLIN3_SIGMA_EXACT * PERLIN3_SIGMA_EXACT)).exp()
         } else {
             1.0
         }
@@ -312,7 +316,7 @@ fn perlin3_octave(p: DVec3, s: DVec3, sels: &[Sel], offsets: &[DVec3], out: &mut
     }
     // Axes without spread (a constant coordinate channel, a plane z = const) get a negligible
     // one: the exact corner integrals divide by σ.
-    let se = s.clamp(DVec3::splat(1e-4), DVec3::splat(PERLIN_SIGMA_EXACT));
+    let se = s.clamp(DVec3::splat(1e-4), DVec3::splat(PERLIN3_SIGMA_EXACT));
     let mut r = [(0.0, DVec3::ZERO); 4];
     if offsets.iter().all(|o| *o == offsets[0]) {
         perlin3_exact(p + offsets[0], se, sels, &mut r, ctx.work);
