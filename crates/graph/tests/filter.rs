@@ -434,3 +434,24 @@ fn filtered_images_match_supersampling() {
     }
     assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
+
+/// A fractal whose every octave the footprint filters away keeps the variance of just its own
+/// octaves: 1 + d² for two octaves of diminish d, not the infinite series.
+#[test]
+fn fully_filtered_fractal_keeps_the_variance_of_its_own_octaves() {
+    let mut rng = Rng(5);
+    for octaves in [1, 2, 3, 6] {
+        let g = graph_of(&format!(
+            r#"<fractal2d name="f" type="float"><input name="octaves" type="integer" value="{octaves}"/><input name="diminish" type="float" value="0.7"/></fractal2d><output name="out" type="float" nodename="f"/>"#
+        ));
+        let out = g.output_id("g/out").unwrap();
+        let mut scratch = EvalScratch::new(&g);
+        let uv = Vec2::new(0.3, 0.2);
+        let l = Mat2::from_diagonal(Vec2::splat(40.0));
+        let f = g.eval_output(out, &Footprint::new(uv, l * l.transpose()), &mut scratch);
+        let (m, m2) = common::supersample(&g, out, uv, l, (rng.uniform(), rng.uniform()), 1 << 16, &mut scratch);
+        let var = m2[0] - m[0] * m[0];
+        println!("{octaves} octaves: node variance {:.4e}, supersampled {var:.4e}", f.ch[0].var);
+        assert!((f.ch[0].var as f64 / var - 1.0).abs() < 0.06, "{octaves} octaves: {} vs {var}", f.ch[0].var);
+    }
+}

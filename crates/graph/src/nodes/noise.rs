@@ -591,6 +591,22 @@ fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     out
 }
 
+/// `Σ (a·dimʲ)²` over the `remaining` octaves after one of amplitude `a`: the variance weight
+/// of the octaves a fractal drops (each is fully filtered to its mean), stopping once the
+/// amplitudes fall below 1e-4.
+pub(crate) fn remaining_power(a: f64, dim: f64, remaining: i32) -> f64 {
+    let mut rest = 0.0;
+    let mut ai = a * dim;
+    for _ in 0..remaining.clamp(0, 64) {
+        if ai.abs() < 1e-4 {
+            break;
+        }
+        rest += ai * ai;
+        ai *= dim;
+    }
+    rest
+}
+
 /// Sums `octaves` filtered Perlin octaves `diminishⁱ perlin((p + offset) · lacunarityⁱ)` (in
 /// noise space); `sels(f)` gives the lattices of the octave at frequency `f`.
 #[allow(clippy::too_many_arguments)]
@@ -608,7 +624,7 @@ fn fractal_sum(
     let mut acc = [(0.0f64, DVec2::ZERO, 0.0f64); 4];
     let (mut a, mut f) = (1.0f64, 1.0f64);
     let mut oct = [Moments::default(); 4];
-    for _ in 0..octaves {
+    for i in 0..octaves {
         // MaterialX offsets the coordinate before the octave loop: (t + offset) · lacunarityⁱ.
         let offs_i: [DVec2; 4] = offs.map(|o| o * f);
         let sel = sels(f);
@@ -622,15 +638,7 @@ fn fractal_sum(
         if !alive {
             // Every further octave is finer still: each contributes its mean (0) and its full
             // variance, without being evaluated.
-            let mut rest = 0.0;
-            let mut ai = a * dim;
-            for _ in 0..64 {
-                rest += ai * ai;
-                ai *= dim;
-                if ai.abs() < 1e-4 {
-                    break;
-                }
-            }
+            let rest = remaining_power(a, dim, octaves - i - 1);
             for a in acc.iter_mut().take(n) {
                 a.2 += rest * sel[0].variance();
             }

@@ -399,7 +399,7 @@ fn fractal_sum(
     let (mut a, mut f) = (1.0f64, 1.0f64);
     let mut oct = [M3::default(); 4];
     let mut offs_i = [DVec3::ZERO; 4];
-    for _ in 0..octaves {
+    for i in 0..octaves {
         for (o, base) in offs_i.iter_mut().zip(offs) {
             *o = *base * f;
         }
@@ -411,15 +411,7 @@ fn fractal_sum(
         }
         if !alive {
             // Every further octave is finer still: its mean (0) and its full variance.
-            let mut rest = 0.0;
-            let mut ai = a * dim;
-            for _ in 0..64 {
-                rest += ai * ai;
-                ai *= dim;
-                if ai.abs() < 1e-4 {
-                    break;
-                }
-            }
+            let rest = super::noise::remaining_power(a, dim, octaves - i - 1);
             for m in acc.iter_mut().take(n) {
                 m.var += rest * PERLIN3_VARIANCE;
             }
