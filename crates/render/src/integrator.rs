@@ -87,14 +87,16 @@ pub struct RenderSettings {
 
 /// How wide textures are filtered relative to the path footprint.
 ///
-/// Filtering each sample over the whole footprint (σ = ½ px at the first hit, the paper's pixel
-/// filter) blurs on top of the pixel filter that the samples already integrate, so the image
-/// converges to a blurrier one than point sampling would, at every sample count. `Auto` (the
-/// default) narrows the texture filter as samples accumulate, as pbrt-v4 does with its ray
-/// differentials: a pixel's `spp` samples cover its filter evenly
-/// ([`crate::sampling::pixel_sample`]), so each stands for about `1/spp` of it and filters over
-/// the footprint scaled by `max(1/8, 1/√spp)`. Few samples get strong anti-aliasing and many
-/// converge to the point-sampled image. Footprints themselves (path statistics, AOVs,
+/// The default, `Fixed(1)`, filters each sample over the whole footprint (σ = ½ px at the first
+/// hit, the paper's pixel filter): the strongest anti-aliasing at few samples, and the footprints
+/// the tile cache and the selective-caching planner are built around. It blurs on top of the
+/// pixel filter that the samples already integrate, so the image converges to a slightly
+/// blurrier one than point sampling would. `Auto` narrows the texture filter as samples
+/// accumulate, as pbrt-v4 does with its ray differentials: a pixel's `spp` samples cover its
+/// filter evenly ([`crate::sampling::pixel_sample`]), so each stands for about `1/spp` of it and
+/// filters over the footprint scaled by `max(1/8, 1/√spp)`; the render converges to the
+/// point-sampled image, at the price of finer footprints: more noise octaves evaluated, and
+/// finer (more, costlier) cache tiles. Footprints themselves (path statistics, AOVs,
 /// `tessera footprint`) are never scaled.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FilterScale {
@@ -137,8 +139,8 @@ impl RenderSettings {
 }
 
 impl RenderSettings {
-    /// `spp` samples with `seed`, the default (covariance) footprints and the default
-    /// ([`FilterScale::Auto`]) texture filter.
+    /// `spp` samples with `seed`, the default (covariance) footprints and the default texture
+    /// filter (the whole footprint, [`FilterScale::Fixed`]`(1)`).
     pub fn new(spp: u32, seed: u64) -> Self {
         RenderSettings {
             spp,
@@ -146,7 +148,7 @@ impl RenderSettings {
             footprint: FootprintMode::default(),
             footprint_aov_density: None,
             free_textures: false,
-            filter_scale: FilterScale::Auto,
+            filter_scale: FilterScale::Fixed(1.0),
         }
     }
 }

@@ -17,10 +17,11 @@ fn scene(name: &str, res: u32) -> Scene {
     render::loader::load_file(&scenes.join(name), &defines).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// A one-sample profile for a final render of `final_spp` samples per pixel: with that render's
-/// texture filter width (the default, `auto`, depends on the sample count).
+/// A one-sample profile for a final render of `final_spp` samples per pixel with the default
+/// settings: with that render's texture filter width (which an `auto` scale would take from
+/// the sample count).
 fn take_profile(scene: &Scene, fraction: f64, final_spp: u32) -> Profile {
-    let scale = FilterScale::Auto.at(final_spp);
+    let scale = RenderSettings::new(final_spp, 0).filter_scale.at(final_spp);
     let opts = ProfileOptions {
         settings: RenderSettings { filter_scale: FilterScale::Fixed(scale), ..RenderSettings::new(1, 77) },
         pixel_fraction: fraction,

@@ -86,10 +86,10 @@ struct RenderArgs {
     /// R, G, B) and <out>.footprint.png (a heat map).
     #[arg(long, value_parser = ["footprint"])]
     aov: Vec<String>,
-    /// Width of procedural texture filtering relative to the footprint: `auto` (narrower as spp
-    /// grows: max(1/8, 1/sqrt(spp)), the default) or a number (1 = the footprint, 0 = point
-    /// sampling).
-    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<render::integrator::FilterScale>())]
+    /// Width of procedural texture filtering relative to the footprint: a number (1 = the
+    /// footprint, the default; 0 = point sampling) or `auto` (narrower as spp grows:
+    /// max(1/8, 1/sqrt(spp))).
+    #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<render::integrator::FilterScale>())]
     filter_scale: render::integrator::FilterScale,
     /// Which procedural graph nodes are cached as mip-mapped tiles: none, outputs, all, auto
     /// (profile, plan, render), nodes:a,b,c (node names, nodegraph/node), plan:FILE or bake:RES.

@@ -41,7 +41,7 @@ pub struct ProfileArgs {
     define: Vec<String>,
     /// Texture filter width relative to the footprint (as for render); `auto` is resolved for the
     /// final render's sample count, `--final-spp`.
-    #[arg(long, default_value = "auto", value_parser = |s: &str| s.parse::<FilterScale>())]
+    #[arg(long, default_value = "1", value_parser = |s: &str| s.parse::<FilterScale>())]
     filter_scale: FilterScale,
     /// Samples per pixel of the final render the profile is for (default: the scene's): sets
     /// the texture filter width under `--filter-scale auto`, so that the profile sees the
