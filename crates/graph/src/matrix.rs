@@ -259,8 +259,10 @@ mod tests {
             }
             (0..a.len())
                 .map(|c| {
-                    let minor: Vec<Vec<f64>> =
-                        a[1..].iter().map(|r| r.iter().enumerate().filter(|(k, _)| *k != c).map(|(_, x)| *x).collect()).collect();
+                    let minor: Vec<Vec<f64>> = a[1..]
+                        .iter()
+                        .map(|r| r.iter().enumerate().filter(|(k, _)| *k != c).map(|(_, x)| *x).collect())
+                        .collect();
                     let sign = if c % 2 == 0 { 1.0 } else { -1.0 };
                     sign * a[0][c] * cofactor(&minor)
                 })

@@ -60,8 +60,8 @@
 
 use crate::error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 use crate::graph::{Graph, GraphBuilder, OutputId, Source};
-use crate::nodes::{self, channel, Param};
 use crate::matrix::Matrix;
+use crate::nodes::{self, channel, Param};
 use crate::value::{Value, ValueType};
 use glam::{DMat3, DVec3};
 use roxmltree::Node as XNode;
@@ -312,11 +312,7 @@ const GLTF_PBR: ShadingModel = ShadingModel {
         Mapped::GltfOpacity,
         Mapped::Input("normal", None),
     ],
-    extra: &[
-        ("alpha", f(1.0)),
-        ("alpha_mode", Some((ValueType::Integer, [0.0, 0.0, 0.0]))),
-        ("alpha_cutoff", f(0.5)),
-    ],
+    extra: &[("alpha", f(1.0)), ("alpha_mode", Some((ValueType::Integer, [0.0, 0.0, 0.0]))), ("alpha_cutoff", f(0.5))],
     silent: &["occlusion", "thickness", "attenuation_distance", "attenuation_color", "dispersion"],
     unsupported: &[
         ("iridescence", &[0.0]),
@@ -590,7 +586,13 @@ impl Document {
         // glTF reads `base_color` twice (base and transmission tint): say a problem once.
         let mut seen = HashSet::new();
         warnings.retain(|w| seen.insert(w.clone()));
-        Some(MaterialBinding { name: name.to_string(), shader: sh.name.clone(), model: model.category, inputs, warnings })
+        Some(MaterialBinding {
+            name: name.to_string(),
+            shader: sh.name.clone(),
+            model: model.category,
+            inputs,
+            warnings,
+        })
     }
 
     /// A `gltf_pbr`'s opacity, as its definition's graph computes it from `alpha`,
@@ -1603,7 +1605,8 @@ impl<'a, 'i> Importer<'a, 'i> {
         inputs: &[(String, ShaderInput)],
     ) -> Result<Option<Result<OutputId, String>>, LoadError> {
         let lookup = |n: &str| inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
-        if gltf_alpha_mode(lookup("alpha_mode")) != Ok(1) || !matches!(lookup("alpha"), Some(ShaderInput::Output(Ok(_))))
+        if gltf_alpha_mode(lookup("alpha_mode")) != Ok(1)
+            || !matches!(lookup("alpha"), Some(ShaderInput::Output(Ok(_))))
         {
             return Ok(None);
         }
@@ -2422,7 +2425,10 @@ impl<'a, 'i> Importer<'a, 'i> {
         let Some(row) = usize::try_from(index).ok().and_then(|i| m.row(i)) else {
             return Err(self.hard(
                 el,
-                LoadErrorKind::Structure(format!("`{q}`: index {index} is not a row of a matrix{n}{n} (0 to {})", n - 1)),
+                LoadErrorKind::Structure(format!(
+                    "`{q}`: index {index} is not a row of a matrix{n}{n} (0 to {})",
+                    n - 1
+                )),
             ));
         };
         let row: Vec<f32> = row.iter().map(|x| *x as f32).collect();
@@ -2451,7 +2457,13 @@ impl<'a, 'i> Importer<'a, 'i> {
     /// The matrix an `<input>` of type matrix33/44 carries, folded at load: its value, or the
     /// matrix node (or interface input) it connects to. `None` when the input is neither set nor
     /// connected (its node's default applies).
-    fn matrix_input(&mut self, scope: usize, inp: XNode<'a, 'i>, n: usize, depth: usize) -> Result<Option<Matrix>, Fail> {
+    fn matrix_input(
+        &mut self,
+        scope: usize,
+        inp: XNode<'a, 'i>,
+        n: usize,
+        depth: usize,
+    ) -> Result<Option<Matrix>, Fail> {
         let port = inp.attribute("name").unwrap_or("?");
         if depth > 256 {
             let q = qualify(&self.scopes[scope].prefix, port);
@@ -2481,7 +2493,10 @@ impl<'a, 'i> Importer<'a, 'i> {
                 Some(m) => Ok(Some(m)),
                 None => Err(self.hard(
                     inp,
-                    LoadErrorKind::MalformedValue { ty: format!("matrix{n}{n} (n² numbers, row by row)"), text: text.into() },
+                    LoadErrorKind::MalformedValue {
+                        ty: format!("matrix{n}{n} (n² numbers, row by row)"),
+                        text: text.into(),
+                    },
                 )),
             },
         }
@@ -2521,7 +2536,11 @@ impl<'a, 'i> Importer<'a, 'i> {
             "add" | "subtract" | "multiply" | "divide" => {
                 let a = operand(self, "in1", Matrix::splat(n, 0.0))?;
                 let b_is_matrix = find("in2").and_then(|i| self.type_name(i)).and_then(Matrix::size_of_type).is_some();
-                let b = operand(self, "in2", if category == "add" || category == "subtract" { Matrix::splat(n, 0.0) } else { ident })?;
+                let b = operand(
+                    self,
+                    "in2",
+                    if category == "add" || category == "subtract" { Matrix::splat(n, 0.0) } else { ident },
+                )?;
                 match category {
                     "add" => a.zip(&b, |x, y| x + y),
                     "subtract" => a.zip(&b, |x, y| x - y),
@@ -2530,10 +2549,8 @@ impl<'a, 'i> Importer<'a, 'i> {
                     _ if b_is_matrix => match b.inverse() {
                         Some(inv) => a.mul(&inv),
                         None => {
-                            return Err(self.hard(
-                                el,
-                                LoadErrorKind::Structure(format!("`{q}`: division by a singular matrix")),
-                            ))
+                            return Err(self
+                                .hard(el, LoadErrorKind::Structure(format!("`{q}`: division by a singular matrix"))))
                         }
                     },
                     _ => a.zip(&b, |x, y| x / y),

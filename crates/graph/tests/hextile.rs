@@ -214,7 +214,8 @@ impl RefTexture {
         let (i, j) = (x.floor() as i64, y.floor() as i64);
         let (fx, fy) = (x - x.floor(), y - y.floor());
         let mut out = [0.0; 4];
-        for (di, dj, wgt) in [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)]
+        for (di, dj, wgt) in
+            [(0, 0, (1.0 - fx) * (1.0 - fy)), (1, 0, fx * (1.0 - fy)), (0, 1, (1.0 - fx) * fy), (1, 1, fx * fy)]
         {
             let t = self.texel(i + di, j + dj);
             for c in 0..4 {
@@ -489,7 +490,9 @@ fn filtered_matches_supersampling() {
             let tile_uv = 1.0 / (2.0 * 3.0f64.sqrt() * p.tiling[0].min(p.tiling[1]));
             for (sigma, ef, ep, spread, sd) in errors(&g, out, &sigmas, 0xabc0 ^ ci as u64) {
                 let ratio = ef / ep.max(1e-12);
-                println!("{name:<14} {ty:>7} {sigma:>8.0e} {ef:>10.2e} {ep:>10.2e} {ratio:>7.3} {spread:>9.2e} {sd:>9.2e}");
+                println!(
+                    "{name:<14} {ty:>7} {sigma:>8.0e} {ef:>10.2e} {ep:>10.2e} {ratio:>7.3} {spread:>9.2e} {sd:>9.2e}"
+                );
                 if sigma <= 1e-4 && ef > 1e-4 {
                     failures.push(format!("{name} {ty} σ={sigma}: filtered error {ef:.2e} at a tiny footprint"));
                 }
@@ -603,8 +606,14 @@ fn missing_file_names_document_and_line() {
 fn unsupported_inputs_and_types() {
     let file = test_png();
     for (body, what) in [
-        (r#"<hextiledimage name="h" type="color3"><input name="file" type="filename" value="{f}"/><input name="uaddressmode" type="string" value="clamp"/></hextiledimage><output name="out" type="color3" nodename="h"/>"#, "uaddressmode"),
-        (r#"<hextiledimage name="h" type="float"><input name="file" type="filename" value="{f}"/></hextiledimage><output name="out" type="float" nodename="h"/>"#, "float"),
+        (
+            r#"<hextiledimage name="h" type="color3"><input name="file" type="filename" value="{f}"/><input name="uaddressmode" type="string" value="clamp"/></hextiledimage><output name="out" type="color3" nodename="h"/>"#,
+            "uaddressmode",
+        ),
+        (
+            r#"<hextiledimage name="h" type="float"><input name="file" type="filename" value="{f}"/></hextiledimage><output name="out" type="float" nodename="h"/>"#,
+            "float",
+        ),
     ] {
         let text = format!(
             r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">{}</nodegraph></materialx>"#,

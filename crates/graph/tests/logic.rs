@@ -149,8 +149,16 @@ fn switch_picks_by_interval_and_filters_to_the_mixture() {
                 total += w;
             }
             let (e, var) = (e / total, e2 / total - (e / total).powi(2));
-            assert!((f.mean as f64 - e).abs() < 2e-3 * (1.0 + e.abs()), "{version} at {cx} σ {sx}: mean {} vs {e}", f.mean);
-            assert!((f.var as f64 - var).abs() < 2e-3 * (1.0 + var), "{version} at {cx} σ {sx}: var {} vs {var}", f.var);
+            assert!(
+                (f.mean as f64 - e).abs() < 2e-3 * (1.0 + e.abs()),
+                "{version} at {cx} σ {sx}: mean {} vs {e}",
+                f.mean
+            );
+            assert!(
+                (f.var as f64 - var).abs() < 2e-3 * (1.0 + var),
+                "{version} at {cx} σ {sx}: var {} vs {var}",
+                f.var
+            );
             // The uv gradient of the mean, against a central difference of the filtered mean.
             let h = 1e-3f32;
             let at = |c: f32, s: &mut EvalScratch| {
@@ -158,7 +166,11 @@ fn switch_picks_by_interval_and_filters_to_the_mixture() {
                 g.eval_output(out, &fp, s).ch[0].mean as f64
             };
             let fd = (at(cx + h, &mut scratch) - at(cx - h, &mut scratch)) / (2.0 * h as f64);
-            assert!((f.grad.x as f64 - fd).abs() < 1e-2 * (1.0 + fd.abs()), "{version} at {cx} σ {sx}: ∂u {} vs {fd}", f.grad.x);
+            assert!(
+                (f.grad.x as f64 - fd).abs() < 1e-2 * (1.0 + fd.abs()),
+                "{version} at {cx} σ {sx}: ∂u {} vs {fd}",
+                f.grad.x
+            );
         }
     }
 }

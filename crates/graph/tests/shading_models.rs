@@ -74,7 +74,10 @@ fn open_pbr_inputs_map_onto_standard_surface_names_with_openpbr_defaults() {
     assert_eq!(b.get("normal"), Some(&MaterialSource::Geometric));
     // Bake: set inputs are listed, unset ones take the model's default.
     assert!(bakeable_elements(&d).contains(&"M/S/base_metalness".to_string()));
-    assert_eq!(resolve(&d, "M/S/specular_roughness").unwrap(), (BakeSource::Constant(Value::float(0.3)), ValueType::Float));
+    assert_eq!(
+        resolve(&d, "M/S/specular_roughness").unwrap(),
+        (BakeSource::Constant(Value::float(0.3)), ValueType::Float)
+    );
     assert!(matches!(resolve(&d, "M/S/base_color").unwrap(), (BakeSource::Output(_), ValueType::Color3)));
 }
 
@@ -144,7 +147,8 @@ fn gltf_maps_metallic_roughness_and_tints_transmission_by_base_color() {
 
 #[test]
 fn gltf_alpha_modes() {
-    let shader = |name: &str, inputs: &str| format!(r#"  <gltf_pbr name="{name}" type="surfaceshader">{inputs}</gltf_pbr>"#);
+    let shader =
+        |name: &str, inputs: &str| format!(r#"  <gltf_pbr name="{name}" type="surfaceshader">{inputs}</gltf_pbr>"#);
     let a = |v: &str| format!(r#"<input name="alpha" type="float" value="{v}"/>"#);
     let mode = |m: u32| format!(r#"<input name="alpha_mode" type="integer" value="{m}"/>"#);
     let body = [

@@ -269,10 +269,9 @@ mod tests {
             (Rfilter::Gaussian { stddev: 0.5 }, 0.25),
         ] {
             let n = 200_000;
-            let m: f64 = (0..n)
-                .map(|_| (f.warp(Vec2::new(rng.next_f32(), rng.next_f32())).x as f64).powi(2))
-                .sum::<f64>()
-                / n as f64;
+            let m: f64 =
+                (0..n).map(|_| (f.warp(Vec2::new(rng.next_f32(), rng.next_f32())).x as f64).powi(2)).sum::<f64>()
+                    / n as f64;
             assert!((m - var).abs() < 0.01 * var.max(0.1) + 0.002, "{f:?}: {m} vs {var}");
         }
     }

@@ -548,9 +548,7 @@ pub fn radiance<O: PathObserver>(
         // The footprint here, carried from the last scattering vertex (or the camera) along this
         // ray; the path keeps it only if it scatters here.
         let (fp_here, var) = match (&vertex, &prev_vertex, &prev_bs) {
-            (Some(v), None, _) => {
-                PathFootprint::start(settings_r.footprint, &scene.camera, cam, v, settings_r.spp)
-            }
+            (Some(v), None, _) => PathFootprint::start(settings_r.footprint, &scene.camera, cam, v, settings_r.spp),
             (Some(v), Some(pv), Some(bs)) => {
                 let mut state = fp;
                 let var = state.advance(pv, bs, ray.d, v);

@@ -67,19 +67,12 @@ fn filtered_graph_at_four_spp_beats_point_sampling() {
     let reference: Image = run(1024, 7, FootprintMode::None);
     let filtered = run(4, 1, FootprintMode::Covariance);
     let point = run(4, 1, FootprintMode::None);
-    let auto = render(
-        &scene,
-        RenderSettings { filter_scale: FilterScale::Auto, ..RenderSettings::new(4, 1) },
-        &|_| {},
-    )
-    .image;
-    let lod = render(
-        &scene,
-        RenderSettings { footprint_aov_density: Some(64.0), ..RenderSettings::new(16, 3) },
-        &|_| {},
-    )
-    .footprint_aov
-    .expect("footprint AOV");
+    let auto =
+        render(&scene, RenderSettings { filter_scale: FilterScale::Auto, ..RenderSettings::new(4, 1) }, &|_| {}).image;
+    let lod =
+        render(&scene, RenderSettings { footprint_aov_density: Some(64.0), ..RenderSettings::new(16, 3) }, &|_| {})
+            .footprint_aov
+            .expect("footprint AOV");
     // MSE per band: (far, middle, near, sky / all) as (sum, count).
     let band = |i: usize| {
         let l = lod.pixels[i].x;

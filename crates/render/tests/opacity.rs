@@ -82,7 +82,10 @@ fn assert_closed_form(img: &Image, expected: Vec3, what: &str) {
     let (mean, se) = mean_and_standard_error(img);
     for c in 0..3 {
         assert!(se[c] < 0.01, "{what}: standard error {se} too large for a meaningful test");
-        assert!((mean[c] - expected[c]).abs() < 5.0 * se[c] + 1e-6, "{what}: channel {c}: {mean} vs {expected} (±{se})");
+        assert!(
+            (mean[c] - expected[c]).abs() < 5.0 * se[c] + 1e-6,
+            "{what}: channel {c}: {mean} vs {expected} (±{se})"
+        );
     }
 }
 
@@ -300,7 +303,9 @@ const CONSTANTS_DOC: &str = r#"<?xml version="1.0"?>
 </materialx>"#;
 
 fn mtlx(material: &str) -> String {
-    format!(r#"<bsdf type="mtlx"><string name="filename" value="c.mtlx"/><string name="material" value="{material}"/></bsdf>"#)
+    format!(
+        r#"<bsdf type="mtlx"><string name="filename" value="c.mtlx"/><string name="material" value="{material}"/></bsdf>"#
+    )
 }
 
 #[test]
@@ -377,8 +382,10 @@ fn trace(scene: &Scene, x: u32, y: u32, sample: u32) -> Footprints {
 #[test]
 fn passing_through_leaves_the_path_footprint_as_if_the_surface_were_absent() {
     let without = load(&room(""));
-    let clear = load(&room(&veil(r#"<bsdf type="mask"><float name="opacity" value="0"/><bsdf type="diffuse"/></bsdf>"#)));
-    let half = load(&room(&veil(r#"<bsdf type="mask"><float name="opacity" value="0.5"/><bsdf type="diffuse"/></bsdf>"#)));
+    let clear =
+        load(&room(&veil(r#"<bsdf type="mask"><float name="opacity" value="0"/><bsdf type="diffuse"/></bsdf>"#)));
+    let half =
+        load(&room(&veil(r#"<bsdf type="mask"><float name="opacity" value="0.5"/><bsdf type="diffuse"/></bsdf>"#)));
     let (mut compared, mut through) = (0, 0);
     for y in (0..20).step_by(3) {
         for x in (0..24).step_by(3) {
@@ -480,9 +487,13 @@ fn gltf_mask_cuts_out_where_alpha_is_below_the_cutoff_filtered_by_the_camera_foo
         if (u0 - 0.25).abs() > 5.0 * du {
             continue;
         }
-        let expected = (0..256).map(|k| 1.0 - phi((u0 + (k as f64 + 0.5) / 256.0 * du - 0.25) / sigma)).sum::<f64>() / 256.0;
+        let expected =
+            (0..256).map(|k| 1.0 - phi((u0 + (k as f64 + 0.5) / 256.0 * du - 0.25) / sigma)).sum::<f64>() / 256.0;
         let got = (0..h).map(|y| img.get(x, y).x as f64).sum::<f64>() / h as f64;
-        assert!((got - expected).abs() < tolerance, "column {x} (u ≈ {u0:.4}): {got:.4} vs {expected:.4} ± {tolerance:.4}");
+        assert!(
+            (got - expected).abs() < tolerance,
+            "column {x} (u ≈ {u0:.4}): {got:.4} vs {expected:.4} ± {tolerance:.4}"
+        );
         checked += 1;
     }
     assert!(checked >= 8, "{checked} columns");
@@ -545,7 +556,9 @@ fn opacity_images_do_not_depend_on_the_thread_count() {
         r#"{}
         <shape type="rectangle"><transform name="to_world"><scale value="1"/><rotate x="1" angle="70"/><translate y="-1" z="0.6"/></transform>{stripes}</shape>
         <shape type="disk"><transform name="to_world"><scale value="0.7"/><translate x="-0.6" z="1.6"/></transform>{checker}</shape>"#,
-        veil(r#"<bsdf type="mtlx"><string name="filename" value="gltf_mask.mtlx"/><string name="material" value="M_mask"/></bsdf>"#)
+        veil(
+            r#"<bsdf type="mtlx"><string name="filename" value="gltf_mask.mtlx"/><string name="material" value="M_mask"/></bsdf>"#
+        )
     );
     let scene = load(&room(&extra));
     let with_threads = |n: usize| {

@@ -337,10 +337,7 @@ impl Params {
     }
 
     fn coherence(&self, lambda: f64) -> f64 {
-        let (sa, sb) = (
-            1.0 + (self.scale_range.x - 1.0) * self.scale,
-            1.0 + (self.scale_range.y - 1.0) * self.scale,
-        );
+        let (sa, sb) = (1.0 + (self.scale_range.x - 1.0) * self.scale, 1.0 + (self.scale_range.y - 1.0) * self.scale);
         if sa * sb <= 0.0 {
             return 0.0;
         }
