@@ -296,13 +296,21 @@ pub fn hermite_moments(f: impl Fn(f64) -> f64, m: f64, s: f64) -> (f64, f64) {
     if s <= 0.0 {
         return (f(m), 0.0);
     }
-    let (mut e, mut e2) = (0.0, 0.0);
+    let (e, v, _) = hermite_stein(f, m, s);
+    (e, v)
+}
+
+/// Mean, variance and `dE/dm` of `f(X)`, `X ~ N(m, s²)`, `s > 0`, on the 5-point Gauss–Hermite
+/// nodes; the slope by Stein's identity `E[f'(X)] = E[(X − m) f(X)] / s²`.
+pub fn hermite_stein(f: impl Fn(f64) -> f64, m: f64, s: f64) -> (f64, f64, f64) {
+    let (mut e, mut e2, mut ez) = (0.0, 0.0, 0.0);
     for (z, w) in HERMITE5 {
         let y = f(m + s * z);
         e += w * y;
         e2 += w * y * y;
+        ez += w * z * y;
     }
-    (e, (e2 - e * e).max(0.0))
+    (e, (e2 - e * e).max(0.0), ez / s)
 }
 
 #[cfg(test)]

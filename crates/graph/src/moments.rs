@@ -77,14 +77,7 @@ pub fn unary(x: Moments, f: impl Fn(f64) -> f64, df: impl Fn(f64) -> f64) -> Mom
     if s == 0.0 {
         return Moments { mean: f(m) as f32, grad: x.grad * df(m) as f32, var: 0.0 };
     }
-    let (mut e, mut e2, mut ez) = (0.0, 0.0, 0.0);
-    for (z, w) in gaussian::HERMITE5 {
-        let y = f(m + s * z);
-        e += w * y;
-        e2 += w * y * y;
-        ez += w * z * y;
-    }
-    chain(x, (e, (e2 - e * e).max(0.0), ez / s))
+    chain(x, gaussian::hermite_stein(f, m, s))
 }
 
 /// Maximum number of channels [`nary`] combines.

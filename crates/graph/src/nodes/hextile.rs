@@ -629,14 +629,7 @@ fn alpha_gain(m: f64, v: f64, falloff: f64) -> (f64, f64, f64) {
         let g = gain(Dual::new(m, DVec2::X), falloff);
         return (g.v, g.d.x * g.d.x * v.max(0.0), g.d.x);
     }
-    let (mut e, mut e2, mut ez) = (0.0, 0.0, 0.0);
-    for (z, wt) in crate::gaussian::HERMITE5 {
-        let y = gain(Dual::constant(m + s * z), falloff).v;
-        e += wt * y;
-        e2 += wt * y * y;
-        ez += wt * z * y;
-    }
-    (e, (e2 - e * e).max(0.0), ez / s)
+    crate::gaussian::hermite_stein(|x| gain(Dual::constant(x), falloff).v, m, s)
 }
 
 /// Divides the weights by their sum; false (and unchanged) when the sum is not a usable
