@@ -93,3 +93,127 @@ pub fn supersample(
     }
     (acc.map(|a| a / samples as f64), acc2.map(|a| a / samples as f64))
 }
+
+/// One footprint size of an error sweep: mean absolute error, per channel and centre, of the
+/// filtered value and of point sampling (the unfiltered value at the centre) against the
+/// brute-force Gaussian average; the true spread of the values over the footprint (their
+/// standard deviation under the Gaussian) and the σ the node reports.
+#[derive(Clone, Copy, Debug)]
+pub struct SweepRow {
+    pub sigma: f32,
+    pub filtered: f64,
+    pub point: f64,
+    pub spread: f64,
+    pub node_sigma: f64,
+}
+
+impl SweepRow {
+    /// Filtered error as a fraction of point sampling's.
+    pub fn ratio(&self) -> f64 {
+        self.filtered / self.point.max(1e-12)
+    }
+}
+
+/// The footprint sizes every sweep spans, in uv units.
+pub const SWEEP_SIGMAS: [f32; 10] = [1e-6, 1e-4, 1e-3, 1e-2, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
+
+/// Filtered evaluation of `out` against brute-force supersampling: for each σ, `centres` random
+/// anisotropic footprints `R diag(σ², (aσ)²) Rᵀ` (aspect a ∈ [0.25, 1], random angle) around
+/// centres drawn by `centre`, each against `samples` unfiltered values (`supersample`).
+pub fn sweep(
+    g: &graph::Graph,
+    out: graph::OutputId,
+    sigmas: &[f32],
+    seed: u64,
+    centres: usize,
+    samples: usize,
+    centre: impl Fn(&mut Rng) -> glam::Vec2,
+) -> Vec<SweepRow> {
+    use glam::{Mat2, Vec2};
+    let mut rng = Rng(seed);
+    let mut scratch = graph::EvalScratch::new(g);
+    let n = g.output(out).ty.channels();
+    let mut rows = Vec::new();
+    for &sigma in sigmas {
+        let (mut ef, mut ep, mut spread, mut sd) = (0.0, 0.0, 0.0, 0.0);
+        for _ in 0..centres {
+            let uv = centre(&mut rng);
+            let a = 0.25 + 0.75 * rng.uniform() as f32;
+            let r = Mat2::from_angle(rng.uniform() as f32 * std::f32::consts::PI);
+            let l = r * Mat2::from_diagonal(Vec2::new(sigma, a * sigma));
+            let f = g.eval_output(out, &graph::Footprint::new(uv, l * l.transpose()), &mut scratch);
+            let p = g.eval_output(out, &graph::Footprint::point(uv), &mut scratch);
+            let shift = (rng.uniform(), rng.uniform());
+            let (acc, acc2) = supersample(g, out, uv, l, shift, samples, &mut scratch);
+            for k in 0..n {
+                let b = acc[k];
+                ef += (f.ch[k].mean as f64 - b).abs();
+                ep += (p.ch[k].mean as f64 - b).abs();
+                spread += (acc2[k] - b * b).max(0.0).sqrt();
+                sd += f.ch[k].sigma() as f64;
+            }
+        }
+        let d = (centres * n) as f64;
+        rows.push(SweepRow { sigma, filtered: ef / d, point: ep / d, spread: spread / d, node_sigma: sd / d });
+    }
+    rows
+}
+
+/// Centres uniform in [-2, 2]²: a few periods of most patterns.
+pub fn centre_in_square(rng: &mut Rng) -> glam::Vec2 {
+    glam::Vec2::new(rng.uniform() as f32 * 4.0 - 2.0, rng.uniform() as f32 * 4.0 - 2.0)
+}
+
+/// The header of a sweep table, for stdout.
+pub fn sweep_header() -> String {
+    format!(
+        "{:<24} {:>8} {:>11} {:>11} {:>8} {:>9} {:>9}",
+        "graph", "sigma", "filt err", "point err", "ratio", "spread", "σ(node)"
+    )
+}
+
+/// A sweep row, for stdout.
+pub fn sweep_line(name: &str, r: &SweepRow) -> String {
+    format!(
+        "{:<24} {:>8.0e} {:>11.2e} {:>11.2e} {:>8.3} {:>9.2e} {:>9.2e}",
+        name,
+        r.sigma,
+        r.filtered,
+        r.point,
+        r.ratio(),
+        r.spread,
+        r.node_sigma
+    )
+}
+
+/// Sweeps as one Markdown table: a row per graph, a column per σ, each cell the filtered error,
+/// the point error and their ratio.
+pub fn sweep_markdown(sweeps: &[(String, Vec<SweepRow>)]) -> String {
+    let Some((_, first)) = sweeps.first() else { return String::new() };
+    let mut s = String::from("| graph |");
+    for r in first {
+        s += &format!(" σ {:.0e} |", r.sigma);
+    }
+    s += "\n|---|";
+    s += &"---:|".repeat(first.len());
+    s += "\n";
+    for (name, rows) in sweeps {
+        s += &format!("| {name} |");
+        for r in rows {
+            if r.point < 1e-9 && r.filtered < 1e-9 {
+                s += " 0 |";
+            } else {
+                s += &format!(" {:.1e} / {:.1e} ({:.2}) |", r.filtered, r.point, r.ratio());
+            }
+        }
+        s += "\n";
+    }
+    s
+}
+
+/// Writes `text` to `docs/<name>` at the workspace root.
+pub fn write_doc(name: &str, text: &str) {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs").join(name);
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    std::fs::write(&path, text).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+}
