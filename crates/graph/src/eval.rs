@@ -80,6 +80,8 @@ pub struct EvalScratch {
     /// Profiling: sampled timings per (node, bin), `bins` per node; empty when off.
     binned: BinnedTimings,
     work: Work,
+    /// Per-node counting and sampled timing on (the default); off only to measure their cost.
+    instrumented: bool,
 }
 
 /// Sampled self-time of each node split by a caller-chosen bin (a profiler labels each
@@ -143,7 +145,16 @@ impl EvalScratch {
             timed: vec![0; n],
             binned: BinnedTimings { period: TIMING_PERIOD, ..BinnedTimings::default() },
             work: Work::default(),
+            instrumented: true,
         }
+    }
+
+    /// Turns per-node evaluation counts and sampled timings off (or back on). They are on by
+    /// default and cheap enough to stay on (`cargo bench -p graph --bench demo_graphs` measures
+    /// their cost side by side); off, [`EvalScratch::evaluations`] and the timings stay zero
+    /// while lookups and work counters still count.
+    pub fn set_instrumented(&mut self, on: bool) {
+        self.instrumented = on;
     }
 
     /// Starts recording sampled timings per node and per bin (`bins` bins; see
@@ -340,7 +351,7 @@ impl Graph {
             }
             let n_in = node.inputs.len();
             let i = id.0 as usize;
-            let timed = scratch.evaluations[i].is_multiple_of(scratch.binned.period);
+            let timed = scratch.instrumented && scratch.evaluations[i].is_multiple_of(scratch.binned.period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
             let mut ctx = Ctx { fp, point, work: &mut scratch.work };
             let v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
@@ -355,7 +366,7 @@ impl Graph {
                 }
             }
             scratch.values[i] = v;
-            scratch.evaluations[i] += 1;
+            scratch.evaluations[i] += scratch.instrumented as u64;
         }
     }
 

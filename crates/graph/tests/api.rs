@@ -86,6 +86,34 @@ fn plans_evaluate_several_outputs() {
     assert_eq!(stats.work.octaves, 3);
 }
 
+/// Instrumentation (counts, sampled timings) only observes: turned off, every value is
+/// bit-identical and the counters stay zero; on, every node counts each evaluation and one in
+/// `TIMING_PERIOD` is timed.
+#[test]
+fn instrumentation_only_observes() {
+    let d = doc();
+    let g = d.graph();
+    let out = g.output_id("g/out").unwrap();
+    let (mut on, mut off) = (EvalScratch::new(g), EvalScratch::new(g));
+    off.set_instrumented(false);
+    let n = 200u64;
+    for i in 0..n {
+        let fp = Footprint::isotropic(Vec2::new(0.013 * i as f32, 0.4), if i % 2 == 0 { 0.0 } else { 1e-3 });
+        let (a, b) = (g.eval_output(out, &fp, &mut on), g.eval_output(out, &fp, &mut off));
+        for c in 0..3 {
+            assert_eq!(a.ch[c].mean.to_bits(), b.ch[c].mean.to_bits());
+            assert_eq!(a.ch[c].var.to_bits(), b.ch[c].var.to_bits());
+        }
+    }
+    let (mut s_on, mut s_off) = (EvalStats::default(), EvalStats::default());
+    on.merge_stats_into(&mut s_on);
+    off.merge_stats_into(&mut s_off);
+    assert!(s_off.evaluations.iter().all(|&c| c == 0) && s_off.timed.iter().all(|&c| c == 0));
+    assert_eq!(s_on.work, s_off.work);
+    assert_eq!(s_on.evaluations, vec![n; g.node_count()]);
+    assert!(s_on.timed.iter().zip(&s_on.evaluations).all(|(&t, &e)| t == e.div_ceil(graph::TIMING_PERIOD)));
+}
+
 #[test]
 fn material_binding_exposes_constants_outputs_and_warnings() {
     let d = doc();

@@ -12,7 +12,7 @@ mod common;
 
 use common::Rng;
 use glam::{Mat2, Vec2};
-use graph::{Document, EvalScratch, Footprint, Graph, LoadErrorKind, LoadOptions, OutputId};
+use graph::{Document, EvalScratch, Footprint, Graph, LoadErrorKind, LoadOptions};
 use std::path::{Path, PathBuf};
 
 const W: u32 = 32;
