@@ -376,6 +376,12 @@ struct Kernel {
     dw: [Poly; 2],
     w1: [Poly; 2],
     dw1: [Poly; 2],
+    /// The pieces on [-1, 0) rewritten in `y = d + 1 ∈ [0, 1)`, the offset from the cell's lower
+    /// lattice coordinate, so that both pieces read the same unit-interval moments.
+    w_up: Poly,
+    dw_up: Poly,
+    w1_up: Poly,
+    dw1_up: Poly,
 }
 
 fn kernel() -> &'static Kernel {
@@ -385,11 +391,16 @@ fn kernel() -> &'static Kernel {
         let wp = poly(&[1.0, 0.0, 0.0, -10.0, 15.0, -6.0]);
         let d = poly(&[0.0, 1.0]);
         let (dwn, dwp) = (poly_mul(&d, &wn), poly_mul(&d, &wp));
+        let up = |p: &Poly| gaussian::poly_shift_scale(p, -1.0, 1.0);
         Kernel {
             w: [wn, wp],
             dw: [dwn, dwp],
             w1: [poly_deriv(&wn), poly_deriv(&wp)],
             dw1: [poly_deriv(&dwn), poly_deriv(&dwp)],
+            w_up: up(&wn),
+            dw_up: up(&dwn),
+            w1_up: up(&poly_deriv(&wn)),
+            dw1_up: up(&poly_deriv(&dwn)),
         }
     })
 }
@@ -403,28 +414,92 @@ pub(super) struct AxisTerms {
     pub dw1: f64,
 }
 
-/// The terms of every lattice coordinate `c` in `lo..=hi` (at most `N`; returns how many),
-/// sharing the tail moments at the integer piece boundaries between coordinates.
+/// Binomial coefficients C(k, i), k, i ≤ [`gaussian::MAX_DEGREE`].
+const BINOMIAL: [[f64; 8]; 8] = {
+    let mut c = [[0.0; 8]; 8];
+    let mut k = 0;
+    while k < 8 {
+        c[k][0] = 1.0;
+        let mut i = 1;
+        while i <= k {
+            c[k][i] = c[k - 1][i - 1] + if i < k { c[k - 1][i] } else { 0.0 };
+            i += 1;
+        }
+        k += 1;
+    }
+    c
+};
+
+/// `E[Y^k 1{0 ≤ Y < 1}]`, k = 0..=7, for `Y = mu + s Z`, from the interval moments `i` of `Z`
+/// over the corresponding standardised interval.
+#[inline]
+fn unit_moments(mu: f64, s: f64, i: &Poly) -> Poly {
+    let mut v = *i;
+    let mut sk = 1.0;
+    for vk in v.iter_mut() {
+        *vk *= sk;
+        sk *= s;
+    }
+    let mut mu_pow = [1.0; 8];
+    for k in 1..8 {
+        mu_pow[k] = mu_pow[k - 1] * mu;
+    }
+    let mut r = [0.0; 8];
+    for k in 0..8 {
+        let mut acc = 0.0;
+        for j in 0..=k {
+            acc += BINOMIAL[k][j] * mu_pow[k - j] * v[j];
+        }
+        r[k] = acc;
+    }
+    r
+}
+
+#[inline]
+fn dot(p: &Poly, r: &Poly) -> f64 {
+    p.iter().zip(r).map(|(a, b)| a * b).sum()
+}
+
+/// The terms of every lattice coordinate `c` in `lo..=hi` (at most `N`; returns how many).
+/// Coordinate `c`'s kernel has pieces on the unit cells `[c − 1, c)` and `[c, c + 1)`; each cell's
+/// moments `E[y^k 1{cell}]` (y the offset from the cell's lower end) are computed once, from tail
+/// moments shared at the integer boundaries, and serve both coordinates that meet the cell.
 pub(super) fn axis_terms<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); N]) -> usize {
     let k = kernel();
-    let tail = |c: i32| gaussian::TailMoments::at((c as f64 - m) / s);
-    // Tail moments at c − 1, c, c + 1: coordinate c's kernel pieces are [c − 1, c) and [c, c + 1).
-    let (mut t0, mut t1) = (tail(lo - 1), tail(lo));
+    let z = |c: i32| (c as f64 - m) / s;
+    let tail = |c: i32| gaussian::TailMoments::at(z(c));
+    // A cell wholly beyond the footprint's reach (both ends past `TAIL_ZERO` σ on one side) has
+    // no moments: `None`, skipped without arithmetic.
+    let cell = |j: i32, a: &gaussian::TailMoments, b: &gaussian::TailMoments| {
+        let (za, zb) = (z(j), z(j + 1));
+        (za < gaussian::TAIL_ZERO && zb > -gaussian::TAIL_ZERO)
+            .then(|| unit_moments(m - j as f64, s, &gaussian::TailMoments::between(a, b)))
+    };
+    let mut t1 = tail(lo);
+    let mut below = cell(lo - 1, &tail(lo - 1), &t1);
     let mut n = 0;
     for c in lo..=hi {
         if n >= N {
             break;
         }
         let t2 = tail(c + 1);
-        let neg = gaussian::TailMoments::between(&t0, &t1);
-        let pos = gaussian::TailMoments::between(&t1, &t2);
-        let mu = m - c as f64;
-        let e = |p: &[Poly; 2]| {
-            gaussian::poly_expectation_with(&p[0], mu, s, &neg) + gaussian::poly_expectation_with(&p[1], mu, s, &pos)
-        };
-        out[n] = (c, AxisTerms { w: e(&k.w), dw: e(&k.dw), w1: e(&k.w1), dw1: e(&k.dw1) });
+        let above = cell(c, &t1, &t2);
+        let mut t = AxisTerms::default();
+        if let Some(r) = &below {
+            t.w += dot(&k.w_up, r);
+            t.dw += dot(&k.dw_up, r);
+            t.w1 += dot(&k.w1_up, r);
+            t.dw1 += dot(&k.dw1_up, r);
+        }
+        if let Some(r) = &above {
+            t.w += dot(&k.w[1], r);
+            t.dw += dot(&k.dw[1], r);
+            t.w1 += dot(&k.w1[1], r);
+            t.dw1 += dot(&k.dw1[1], r);
+        }
+        out[n] = (c, t);
         n += 1;
-        (t0, t1) = (t1, t2);
+        (t1, below) = (t2, above);
     }
     n
 }
