@@ -181,7 +181,7 @@ fn demo_wood_floor_at_four_spp_beats_point_sampling() {
         render(&scene, settings, &|_| {}).image
     };
     let auto = FilterScale::Auto;
-    let reference = run(512, 11, FootprintMode::None, auto);
+    let reference = run(1024, 11, FootprintMode::None, auto);
     let mse = |a: &Image| {
         a.pixels.iter().zip(&reference.pixels).map(|(p, r)| (*p - *r).length_squared() as f64).sum::<f64>()
             / a.pixels.len() as f64
@@ -196,7 +196,7 @@ fn demo_wood_floor_at_four_spp_beats_point_sampling() {
     let (m_filtered, m_point, m_paper) = (mse(&filtered), mse(&point), mse(&paper));
     let (e_filtered, e_point) = (relative_mse(&filtered, &reference), relative_mse(&point, &reference));
     eprintln!(
-        "wood floor, 4 spp vs 512-spp point-sampled reference: MSE filter scale auto {m_filtered:.3e} point {m_point:.3e} (ratio {:.3}); relMSE ratio {:.3}; filter scale 1 (default): {m_paper:.3e} (ratio {:.3}); at 64 spp: scale 1 {:.3e}, auto {:.3e}",
+        "wood floor, 4 spp vs 1024-spp point-sampled reference: MSE filter scale auto {m_filtered:.3e} point {m_point:.3e} (ratio {:.3}); relMSE ratio {:.3}; filter scale 1 (default): {m_paper:.3e} (ratio {:.3}); at 64 spp: scale 1 {:.3e}, auto {:.3e}",
         m_filtered / m_point,
         e_filtered / e_point,
         m_paper / m_point,
