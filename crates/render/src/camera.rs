@@ -46,6 +46,9 @@ pub struct CameraRay {
     pub dd_dy: Vec3,
     /// The unnormalised direction itself.
     pub d_unnormalised: Vec3,
+    /// The film position's offset from its pixel's centre, in pixels (set by
+    /// [`crate::integrator::camera_sample`]; zero from [`Camera::generate_ray`]).
+    pub film_offset: Vec2,
 }
 
 impl Camera {
@@ -112,7 +115,7 @@ impl Camera {
         let dd_dy = self.axes[1] * (-2.0 * self.tan_half_y / self.height as f32);
         // Clip planes are distances along the optical axis, as in Mitsuba.
         let ray = Ray { o: self.origin, d: dir, tmin: self.near / inv_len, tmax: self.far / inv_len };
-        CameraRay { ray, dd_dx, dd_dy, d_unnormalised: d }
+        CameraRay { ray, dd_dx, dd_dy, d_unnormalised: d, film_offset: Vec2::ZERO }
     }
 
     /// Projects a world point to continuous film coordinates, if in front of the camera.

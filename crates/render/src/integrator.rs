@@ -15,7 +15,7 @@ use crate::scene::Scene;
 use crate::shading::{Material, ShadeScratch};
 use crate::texture::ShadeContext;
 use footprint::Vertex;
-use glam::{DMat2, Mat2, Vec2, Vec3};
+use glam::{DMat2, DVec2, Mat2, Vec2, Vec3};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
@@ -89,15 +89,16 @@ pub struct RenderSettings {
 ///
 /// The default, `Fixed(1)`, filters each sample over the whole footprint (σ = ½ px at the first
 /// hit, the paper's pixel filter): the strongest anti-aliasing at few samples, and the footprints
-/// the tile cache and the selective-caching planner are built around. It blurs on top of the
-/// pixel filter that the samples already integrate, so the image converges to a slightly
-/// blurrier one than point sampling would. `Auto` narrows the texture filter as samples
-/// accumulate, as pbrt-v4 does with its ray differentials: a pixel's `spp` samples cover its
-/// filter evenly ([`crate::sampling::pixel_sample`]), so each stands for about `1/spp` of it and
-/// filters over the footprint scaled by `max(1/8, 1/√spp)`; the render converges to the
-/// point-sampled image, at the price of finer footprints: more noise octaves evaluated, and
-/// finer (more, costlier) cache tiles. Footprints themselves (path statistics, AOVs,
-/// `tessera footprint`) are never scaled.
+/// the tile cache and the selective-caching planner are built around. At the first hit the
+/// footprint is centred where the pixel centre's ray meets the surface ([`recentre_fraction`]),
+/// so every sample reads the texture filtered by the pixel filter once: textures add no noise
+/// there, and the render converges to the point-sampled image as far as the graph's filtered
+/// approximations allow. `Auto` narrows the texture filter as samples accumulate, as pbrt-v4
+/// does with its ray differentials (`max(1/8, 1/√spp)`, centred part of the way so that the
+/// total blur is still the pixel filter): it relies less on the filtered approximations (the
+/// footprint is finer), at the price of texture noise and finer footprints: more noise octaves
+/// evaluated, and finer (more, costlier) cache tiles. Footprints themselves (path statistics,
+/// AOVs, `tessera footprint`) are never scaled or moved.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum FilterScale {
     /// A fixed scale of the footprint's standard deviation (1 = the paper's footprint).
@@ -314,7 +315,9 @@ pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (Camer
     let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
     let offset = scene.rfilter.warp(crate::sampling::pixel_sample(seed, pixel_index, u64::from(s)));
     let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
-    (scene.camera.generate_ray(film), Rng::for_sample(seed, pixel_index, u64::from(s)))
+    let mut cam = scene.camera.generate_ray(film);
+    cam.film_offset = offset;
+    (cam, Rng::for_sample(seed, pixel_index, u64::from(s)))
 }
 
 /// Mean radiance of one pixel over `settings.spp` samples, reporting every path to `obs`.
@@ -386,8 +389,10 @@ fn past(si: &SurfaceInteraction, t: f32) -> f32 {
 }
 
 /// The material's graph outputs at hit `si`, filtered over the uv footprint that `var` (the
-/// tangent-plane covariance at `vertex`) gives there; a point without a vertex, the means with
-/// `--free-textures`, nothing for a material without graphs.
+/// tangent-plane covariance at `vertex`) gives there, centred `shift` (tangent plane) away from
+/// the hit; a point without a vertex, the means with `--free-textures`, nothing for a material
+/// without graphs.
+#[allow(clippy::too_many_arguments)]
 fn material_outputs<'a>(
     scene: &'a Scene,
     settings: &RenderSettings,
@@ -396,17 +401,71 @@ fn material_outputs<'a>(
     si: &SurfaceInteraction,
     vertex: Option<&Vertex>,
     var: DMat2,
+    shift: DVec2,
 ) -> &'a [graph::Filtered] {
     if material.graphs.is_empty() {
         &[]
     } else if settings.free_textures {
         &material.constant_outputs
     } else {
-        let cov = match vertex {
-            Some(v) => footprint::uv_covariance(var, v).as_mat2() * settings.filter_scale_squared(),
-            None => Mat2::ZERO,
+        let fp = match vertex {
+            Some(v) => {
+                let cov = footprint::uv_covariance(var, v).as_mat2() * settings.filter_scale_squared();
+                let mut fp = crate::shading::footprint_at(si, cov);
+                if shift != DVec2::ZERO {
+                    fp.uv += (v.local().uv_jacobian * shift).as_vec2();
+                    fp.geom.p += (v.t * shift.x + v.b * shift.y).as_vec3();
+                }
+                fp
+            }
+            None => crate::shading::footprint_at(si, Mat2::ZERO),
         };
-        shade.evaluate(&scene.graphs, material, &crate::shading::footprint_at(si, cov))
+        shade.evaluate(&scene.graphs, material, &fp)
+    }
+}
+
+/// How far toward the pixel centre a camera ray's first vertex moves its texture footprint, as a
+/// fraction of the way.
+///
+/// A sample's film offset δ is drawn from the pixel filter (σ = ½ px), and the first vertex's
+/// footprint is that same filter projected onto the surface (σ scaled by `k`, the texture
+/// filter scale). Filtering around the sample's own hit blurs the texture twice: a render
+/// converges to the texture blurred by σ√(1 + k²), not by the pixel filter. Centring the
+/// footprint a fraction `c` of the way from the hit to where the pixel centre's ray meets the
+/// hit's tangent plane leaves a spread of `(1 − c)σ` in the centres, so the expected texture is
+/// blurred by `σ √((1 − c)² + k²)`: the pixel filter exactly (in the footprint's linear model)
+/// when `c = 1 − √(1 − k²)`. For the whole footprint (`k` = 1) `c` = 1: every sample reads the
+/// texture filtered over its pixel, which then adds no noise of its own.
+pub fn recentre_fraction(filter_scale: f32) -> f64 {
+    let k = filter_scale as f64;
+    1.0 - (1.0 - k * k).max(0.0).sqrt()
+}
+
+/// The tangent-plane offset from a camera ray's first hit `v` to its texture footprint's centre
+/// ([`recentre_fraction`] of the way to the pixel centre's ray's hit on the tangent plane); zero
+/// for estimators other than the covariance tracker (the ray cone and pbrt-style differentials
+/// keep their published centring), when the centre's ray does not meet the plane in front of
+/// the camera, or for a non-finite result.
+fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) -> DVec2 {
+    if settings.footprint != FootprintMode::Covariance || cam.film_offset == Vec2::ZERO {
+        return DVec2::ZERO;
+    }
+    let c = recentre_fraction(settings.filter_scale.at(settings.spp));
+    // The pixel centre's ray (directions are linear in film position) meets the hit's tangent
+    // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
+    let o = cam.ray.o.as_dvec3();
+    let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
+    let g = v.local().geometric_normal;
+    let (num, den) = ((v.p - o).dot(g), dc.dot(g));
+    if !(num * den > 0.0) {
+        return DVec2::ZERO;
+    }
+    let d = o + dc * (num / den) - v.p;
+    let shift = DVec2::new(d.dot(v.t), d.dot(v.b)) * c;
+    if shift.is_finite() && shift.length_squared() <= footprint::MAX_VARIANCE {
+        shift
+    } else {
+        DVec2::ZERO
     }
 }
 
@@ -459,7 +518,7 @@ fn transmittance(
             }
             _ => (None, DMat2::ZERO),
         };
-        let outputs = material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var);
+        let outputs = material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var, DVec2::ZERO);
         tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
         if max_component(tr) <= 0.0 {
             return Spectrum::ZERO;
@@ -556,6 +615,11 @@ pub fn radiance<O: PathObserver>(
             }
             _ => (fp, DMat2::ZERO),
         };
+        // On the camera ray, textures are filtered around the pixel centre's hit.
+        let shift = match (&vertex, &prev_vertex) {
+            (Some(v), None) => first_vertex_shift(&settings_r, cam, v),
+            _ => DVec2::ZERO,
+        };
         if let Some(ei) = shape.emitter {
             let e = &scene.emitters[ei as usize];
             if let crate::emitter::Emitter::Area { radiance, .. } = e {
@@ -573,7 +637,7 @@ pub fn radiance<O: PathObserver>(
         let mut scatter_pdf = 1.0f32;
         let mut shaded = None;
         if material.bsdf.is_masked() {
-            let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var);
+            let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var, shift);
             let ctx = ShadeContext { uv: si.uv, outputs };
             let o = material.bsdf.opacity(&ctx);
             let p = (o.x + o.y + o.z) / 3.0;
@@ -604,7 +668,7 @@ pub fn radiance<O: PathObserver>(
             Some(s) => s,
             None => {
                 // Procedural textures are filtered to the vertex's uv footprint (a point without one).
-                let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var);
+                let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var, shift);
                 shade_bsdf(material, &si, &ShadeContext { uv: si.uv, outputs })
             }
         };

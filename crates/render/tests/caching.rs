@@ -41,10 +41,16 @@ fn cached_renders_agree_with_uncached_ones() {
             stats.peak_bytes,
             stats.total().fills
         );
-        // Documented bound: cached lookups (trilinear over f16 tiles, means only) stay within
-        // 2 % relative MSE of direct filtered evaluation on this scene (measured: outputs
-        // 8.1e-3, all 1.5e-2), far below the noise between two seeds.
-        assert!(e < 0.02 && e < 0.1 * noise, "{strategy}: {e:.3e} vs noise {noise:.3e}");
+        // Documented bounds: cached lookups (trilinear over f16 tiles, means only) stay within
+        // 2 % relative MSE of direct filtered evaluation on this scene when the outputs are
+        // cached (measured 1.5e-2), far below the noise between two seeds. Caching every node
+        // (`all`) also caches intermediate nodes whose tiles keep no spread for the nonlinear
+        // nodes downstream: 5 % (measured 3.6e-2). Since every sample of a pixel filters its
+        // first hit's textures around the pixel centre, the samples read the same texels and a
+        // lookup's interpolation error no longer averages out over a pixel (at 8 spp these
+        // were 8.1e-3 and 1.5e-2 when each sample read around its own hit).
+        let (bound, rel) = if strategy == "all" { (0.05, 0.15) } else { (0.02, 0.1) };
+        assert!(e < bound && e < rel * noise, "{strategy}: {e:.3e} vs noise {noise:.3e}");
         assert!(stats.total().fills > 0 && stats.over_budget == 0);
     }
 }
