@@ -58,9 +58,9 @@ fn graph_texture_renders_and_counts_evaluations() {
 /// far field, where a pixel's footprint spans a square or more (LOD ≥ 0), is where point
 /// sampling aliases; the near field (LOD < −2, squares over 4σ wide) is resolvable detail, whose
 /// 4-spp noise goes too because every sample reads the texture filtered over its pixel (the
-/// first hit's footprint is centred on the pixel); the middle band lies between. What is left
-/// there is mostly the checkerboard's filter taking the footprint's u and v spreads as
-/// independent, which grazing footprints (long, thin, turned against the checks) are not.
+/// first hit's footprint is centred on the pixel); the middle band lies between. The
+/// checkerboard is filtered over the footprint's turned ellipse (grazing footprints are long,
+/// thin and turned against the checks off the image's centre line).
 #[test]
 fn filtered_graph_at_four_spp_beats_point_sampling() {
     let scene = load(&grazing_scene(&checker_texture()));
@@ -116,16 +116,17 @@ fn filtered_graph_at_four_spp_beats_point_sampling() {
     let (e_filtered, e_point) = (relative_mse(&filtered, &reference), relative_mse(&point, &reference));
     eprintln!("relMSE filtered {e_filtered:.3e} point {e_point:.3e} (ratio {:.3})", e_filtered / e_point);
     assert!(counts[0] > 200 && counts[2] > 200, "bands too small to compare: {counts:?}");
-    // Where point sampling aliases, filtering removes nearly all of its error, at either width.
-    assert!(f[0] < 0.1 * p[0], "far field: filtered {:.3e} point {:.3e}", f[0], p[0]);
+    // Where point sampling aliases, filtering removes nearly all of its error, at either width
+    // (measured 0.028, auto 0.042).
+    assert!(f[0] < 0.06 * p[0], "far field: filtered {:.3e} point {:.3e}", f[0], p[0]);
     assert!(a[0] < 0.1 * p[0], "far field: auto {:.3e} point {:.3e}", a[0], p[0]);
     // Every band and the whole image: each sample reads the texture filtered over its pixel,
-    // so what point sampling leaves as 4-spp noise on resolvable checks goes too.
-    for k in [1, 2, 4] {
-        assert!(f[k] < 0.25 * p[k], "band {k}: MSE filtered {:.3e} vs point {:.3e}", f[k], p[k]);
+    // so what point sampling leaves as 4-spp noise on resolvable checks goes too (measured:
+    // middle 0.005, near 0.002, whole image 0.015, relative MSE 0.035).
+    for (k, bound) in [(1, 0.02), (2, 0.01), (4, 0.03)] {
+        assert!(f[k] < bound * p[k], "band {k}: MSE filtered {:.3e} vs point {:.3e}", f[k], p[k]);
     }
-    assert!(f[4] < 0.15 * p[4], "MSE filtered {:.3e} vs point {:.3e}", f[4], p[4]);
-    assert!(e_filtered < 0.2 * e_point, "relMSE filtered {e_filtered:.4e} vs point {e_point:.4e}");
+    assert!(e_filtered < 0.07 * e_point, "relMSE filtered {e_filtered:.4e} vs point {e_point:.4e}");
     // `auto` filters each sample over its share of the pixel, centred part of the way: a
     // narrower filter, so more of point sampling's noise is left.
     assert!(a[4] < 0.3 * p[4] && f[4] < a[4], "MSE auto {:.3e} vs point {:.3e}", a[4], p[4]);
