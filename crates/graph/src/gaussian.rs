@@ -114,7 +114,7 @@ pub const TAIL_ZERO: f64 = 10.0;
 const FULL_MOMENTS: Poly = [1.0, 0.0, 1.0, 0.0, 3.0, 0.0, 15.0, 0.0];
 
 impl TailMoments {
-    /// Tail moments at `z` (clamped to ±40).
+    /// Tail moments at `z` (zero beyond ±[`TAIL_ZERO`]).
     pub fn at(z: f64) -> TailMoments {
         let upper = z >= 0.0;
         // Beyond 10σ every tail moment is below 1e-15 (|z|⁷ φ(z) at z = 10): zero, without the
@@ -286,7 +286,7 @@ pub fn square_wave_expectation(m: f64, s: f64) -> (f64, f64) {
 
 /// `E[sq(U) sq(V)]` for `(U, V)` jointly Gaussian with means `m` and covariance
 /// `[[c[0], c[1]], [c[1], c[2]]]` (a checkerboard's parity, [`square_wave_expectation`]'s wave
-/// on each axis).
+/// on each axis); `axes` are the axes' own means `E[sq(U)]`, `E[sq(V)]`, which the caller has.
 ///
 /// Uncorrelated spreads give the product of the two axes' expectations. A correlated footprint
 /// is a turned ellipse, which the product blurs as the box around it: a thin footprint along a
@@ -300,15 +300,15 @@ pub fn square_wave_expectation(m: f64, s: f64) -> (f64, f64) {
 ///   integrated exactly ([`checker_line`]). The mean of a line is only piecewise smooth across
 ///   (it kinks where the line passes a grid corner), hence the plain midpoint rule; lines
 ///   crossing more than [`CHECKER_MAX_CROSSINGS`] grid lines fall back to the product.
-pub fn checker_expectation(m: [f64; 2], c: [f64; 3]) -> f64 {
+pub fn checker_expectation(m: [f64; 2], c: [f64; 3], axes: [f64; 2]) -> f64 {
     let (su, sv) = (c[0].max(0.0).sqrt(), c[2].max(0.0).sqrt());
-    let product = || square_wave_expectation(m[0], su).0 * square_wave_expectation(m[1], sv).0;
+    let product = || axes[0] * axes[1];
     if su == 0.0 || sv == 0.0 {
         return product();
     }
     let rho = c[1] / (su * sv);
     if rho.abs() <= 0.6 {
-        return checker_mehler(m, [su, sv], rho);
+        return checker_mehler(m, [su, sv], rho, axes);
     }
     // Principal axes: λ₁ ≥ λ₂, e₁ the major direction.
     let half_tr = 0.5 * (c[0] + c[2]);
@@ -338,19 +338,19 @@ pub fn checker_expectation(m: [f64; 2], c: [f64; 3]) -> f64 {
 /// `E[f(U) g(V)] = Σₙ ρⁿ/n! · σᵤⁿ E[f⁽ⁿ⁾(U)] · σᵥⁿ E[g⁽ⁿ⁾(V)]`, with `E[f⁽ⁿ⁾(U)] = dⁿE[f(U)]/dmⁿ`
 /// ([`square_wave_derivatives`]), summed until two successive terms fall below 1e-9 (at most
 /// `20.7/(−ln|ρ|) + 4` terms: 45 at `|ρ| = 0.6`, 13 at 0.1).
-fn checker_mehler(m: [f64; 2], s: [f64; 2], rho: f64) -> f64 {
+fn checker_mehler(m: [f64; 2], s: [f64; 2], rho: f64, axes: [f64; 2]) -> f64 {
     const N: usize = 64;
     // Terms shrink about like |ρ|ⁿ: enough of them for 1e-9, plus a margin.
     let n = if rho == 0.0 { 0 } else { ((20.7 / -rho.abs().ln()).ceil() as usize + 4).min(N) };
-    let (mut du, mut dv) = ([0.0; N + 1], [0.0; N + 1]);
-    square_wave_derivatives(m[0], s[0], &mut du[..=n]);
-    square_wave_derivatives(m[1], s[1], &mut dv[..=n]);
-    let mut e = du[0] * dv[0];
+    let (mut du, mut dv) = ([0.0; N], [0.0; N]);
+    square_wave_derivatives(m[0], s[0], &mut du[..n]);
+    square_wave_derivatives(m[1], s[1], &mut dv[..n]);
+    let mut e = axes[0] * axes[1];
     let mut coef = 1.0;
     let mut small = 0;
-    for n in 1..=n {
-        coef *= rho / n as f64;
-        let t = coef * du[n] * dv[n];
+    for k in 1..=n {
+        coef *= rho / k as f64;
+        let t = coef * du[k - 1] * dv[k - 1];
         e += t;
         small = if t.abs() < 1e-9 { small + 1 } else { 0 };
         if small == 2 {
@@ -360,14 +360,13 @@ fn checker_mehler(m: [f64; 2], s: [f64; 2], rho: f64) -> f64 {
     e
 }
 
-/// `out[n] = sⁿ dⁿ/dmⁿ E[sq(X)]`, `X ~ N(m, s²)`, `s > 0`: `out[0]` is the mean
-/// ([`square_wave_expectation`]); for `n ≥ 1`, below `s = 0.4` a sum over the wave's jumps
+/// `out[n − 1] = sⁿ dⁿ/dmⁿ E[sq(X)]` for `n = 1..=out.len()`, `X ~ N(m, s²)`, `s > 0` (the mean
+/// itself is [`square_wave_expectation`]'s): below `s = 0.4` a sum over the wave's jumps
 /// `Δₖ = 2(−1)ᵏ` at integers `k` of `Δₖ Heₙ₋₁(zₖ) φ(zₖ)`, `zₖ = (k − m)/s` (probabilists'
 /// Hermite polynomials); above, the derivatives of its damped Fourier series.
 pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
     out.fill(0.0);
-    out[0] = square_wave_expectation(m, s).0;
-    let n_max = out.len() - 1;
+    let n_max = out.len();
     if s < 0.4 {
         let reach = 10.0 + (2.0 * n_max as f64).sqrt();
         let mut k = (m - reach * s).ceil();
@@ -375,10 +374,10 @@ pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
             let z = (k - m) / s;
             let jump = if (k as i64).rem_euclid(2) == 0 { 2.0 } else { -2.0 };
             let w = jump * pdf(z);
-            let (mut h0, mut h1) = (1.0, z); // He₀, He₁
-            for (n, o) in out.iter_mut().enumerate().skip(1) {
+            let (mut h0, mut h1) = (1.0, z); // Heₙ₋₁, Heₙ for n = 1
+            for (i, o) in out.iter_mut().enumerate() {
                 *o += w * h0;
-                let h2 = z * h1 - n as f64 * h0;
+                let h2 = z * h1 - (i + 1) as f64 * h0;
                 (h0, h1) = (h1, h2);
             }
             k += 1.0;
@@ -396,9 +395,9 @@ pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
             let (sn, cs) = (w * m).sin_cos();
             let cycle = [sn, cs, -sn, -cs];
             let mut ws = 1.0;
-            for (n, o) in out.iter_mut().enumerate().skip(1) {
+            for (i, o) in out.iter_mut().enumerate() {
                 ws *= w * s;
-                *o += a * ws * cycle[n % 4];
+                *o += a * ws * cycle[(i + 1) % 4];
             }
             j += 2.0;
         }
@@ -600,7 +599,9 @@ mod tests {
                 for &(mu, mv) in &[(0.37, 0.11), (-3.2, 5.05)] {
                     let (c, s) = (f64::cos(th), f64::sin(th));
                     let cov = [a * a * c * c + b * b * s * s, (a * a - b * b) * c * s, a * a * s * s + b * b * c * c];
-                    let got = checker_expectation([mu, mv], cov);
+                    let axes =
+                        [square_wave_expectation(mu, cov[0].sqrt()).0, square_wave_expectation(mv, cov[2].sqrt()).0];
+                    let got = checker_expectation([mu, mv], cov, axes);
                     let n = 1u32 << 20;
                     let mut sum = 0.0;
                     for i in 0..n {

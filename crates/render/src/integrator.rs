@@ -389,9 +389,8 @@ fn past(si: &SurfaceInteraction, t: f32) -> f32 {
 }
 
 /// The material's graph outputs at hit `si`, filtered over the uv footprint that `var` (the
-/// tangent-plane covariance at `vertex`) gives there, centred `shift` (tangent plane) away from
-/// the hit; a point without a vertex, the means with `--free-textures`, nothing for a material
-/// without graphs.
+/// tangent-plane covariance at `vertex`) gives there, centred `shift` away from the hit; a point
+/// without a vertex, the means with `--free-textures`, nothing for a material without graphs.
 #[allow(clippy::too_many_arguments)]
 fn material_outputs<'a>(
     scene: &'a Scene,
@@ -401,7 +400,7 @@ fn material_outputs<'a>(
     si: &SurfaceInteraction,
     vertex: Option<&Vertex>,
     var: DMat2,
-    shift: DVec2,
+    shift: CentreShift,
 ) -> &'a [graph::Filtered] {
     if material.graphs.is_empty() {
         &[]
@@ -412,10 +411,8 @@ fn material_outputs<'a>(
             Some(v) => {
                 let cov = footprint::uv_covariance(var, v).as_mat2() * settings.filter_scale_squared();
                 let mut fp = crate::shading::footprint_at(si, cov);
-                if shift != DVec2::ZERO {
-                    fp.uv += (v.local().uv_jacobian * shift).as_vec2();
-                    fp.geom.p += (v.t * shift.x + v.b * shift.y).as_vec3();
-                }
+                fp.uv += shift.uv;
+                fp.geom.p += shift.p;
                 fp
             }
             None => crate::shading::footprint_at(si, Mat2::ZERO),
@@ -441,32 +438,39 @@ pub fn recentre_fraction(filter_scale: f32) -> f64 {
     1.0 - (1.0 - k * k).max(0.0).sqrt()
 }
 
-/// The tangent-plane offset from a camera ray's first hit `v` to its texture footprint's centre
+/// Where a texture footprint is centred relative to its hit, in uv and in world space.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct CentreShift {
+    uv: Vec2,
+    p: Vec3,
+}
+
+/// The offset from a camera ray's first hit `v` to its texture footprint's centre
 /// ([`recentre_fraction`] of the way to the pixel centre's ray's hit on the tangent plane); zero
 /// for estimators other than the covariance tracker (the ray cone and pbrt-style differentials
 /// keep their published centring), when the centre's ray does not meet the plane in front of
 /// the camera, or for a non-finite result.
-fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) -> DVec2 {
+fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) -> CentreShift {
     if settings.footprint != FootprintMode::Covariance || cam.film_offset == Vec2::ZERO {
-        return DVec2::ZERO;
+        return CentreShift::default();
     }
     let c = recentre_fraction(settings.filter_scale.at(settings.spp));
     // The pixel centre's ray (directions are linear in film position) meets the hit's tangent
     // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
     let o = cam.ray.o.as_dvec3();
     let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
-    let g = v.local().geometric_normal;
+    let local = v.local();
+    let g = local.geometric_normal;
     let (num, den) = ((v.p - o).dot(g), dc.dot(g));
     if !(num * den > 0.0) {
-        return DVec2::ZERO;
+        return CentreShift::default();
     }
     let d = o + dc * (num / den) - v.p;
     let shift = DVec2::new(d.dot(v.t), d.dot(v.b)) * c;
-    if shift.is_finite() && shift.length_squared() <= footprint::MAX_VARIANCE {
-        shift
-    } else {
-        DVec2::ZERO
+    if !(shift.is_finite() && shift.length_squared() <= footprint::MAX_VARIANCE) {
+        return CentreShift::default();
     }
+    CentreShift { uv: (local.uv_jacobian * shift).as_vec2(), p: (v.t * shift.x + v.b * shift.y).as_vec3() }
 }
 
 /// The material's BSDF at a hit and the shading frame it is evaluated in (bent by a
@@ -518,7 +522,8 @@ fn transmittance(
             }
             _ => (None, DMat2::ZERO),
         };
-        let outputs = material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var, DVec2::ZERO);
+        let outputs =
+            material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var, CentreShift::default());
         tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
         if max_component(tr) <= 0.0 {
             return Spectrum::ZERO;
@@ -618,7 +623,7 @@ pub fn radiance<O: PathObserver>(
         // On the camera ray, textures are filtered around the pixel centre's hit.
         let shift = match (&vertex, &prev_vertex) {
             (Some(v), None) => first_vertex_shift(&settings_r, cam, v),
-            _ => DVec2::ZERO,
+            _ => CentreShift::default(),
         };
         if let Some(ei) = shape.emitter {
             let e = &scene.emitters[ei as usize];

@@ -1135,20 +1135,11 @@ mod tests {
                 // Reference: every corner within ±6σ, by widening the spread's tail.
                 let (mut refv, mut xs, mut ys) =
                     (0.0, [(0, AxisTerms::default()); WIDE], [(0, AxisTerms::default()); WIDE]);
-                let nx = axis_terms(
-                    p.x,
-                    s.x,
-                    (p.x - 1.0 - 6.0 * s.x).floor() as i32,
-                    (p.x + 1.0 + 6.0 * s.x).ceil() as i32,
-                    &mut xs,
-                );
-                let ny = axis_terms(
-                    p.y,
-                    s.y,
-                    (p.y - 1.0 - 6.0 * s.y).floor() as i32,
-                    (p.y + 1.0 + 6.0 * s.y).ceil() as i32,
-                    &mut ys,
-                );
+                let wide = |m: f64, s: f64, buf: &mut [(i32, AxisTerms); WIDE]| {
+                    axis_terms(m, s, (m - 1.0 - 6.0 * s).floor() as i32, (m + 1.0 + 6.0 * s).ceil() as i32, buf)
+                };
+                let nx = wide(p.x, s.x, &mut xs);
+                let ny = wide(p.y, s.y, &mut ys);
                 for &(cy, ty) in &ys[..ny] {
                     for &(cx, tx) in &xs[..nx] {
                         let g = gradient_vector(hash::hash2(cx, cy));

@@ -544,7 +544,7 @@ fn checker_weight(ins: &[Filtered], ctx: &mut Ctx) -> Moments {
     // The parity's mean over the footprint's ellipse (its u–v correlation included); the slope
     // is the product rule's, from the axes' own expectations.
     let c = crate::moments::cov(&u, &v, ctx.fp) as f64;
-    let s = gaussian::checker_expectation([u.mean as f64, v.mean as f64], [u.var as f64, c, v.var as f64]);
+    let s = gaussian::checker_expectation([u.mean as f64, v.mean as f64], [u.var as f64, c, v.var as f64], [eu, ev]);
     // P(odd cell) = (1 − S)/2, a Bernoulli variable.
     let p = (1.0 - s) / 2.0;
     let ds = u.grad * (du * ev) as f32 + v.grad * (eu * dv) as f32;
