@@ -10,7 +10,7 @@
 use crate::graph::{Graph, NodeId, OutputId, Source};
 use crate::nodes::{self, geometry, Ctx};
 use crate::value::{Filtered, Footprint, ValueType};
-use glam::Mat2;
+use glam::{Mat2, Vec2};
 
 /// Counters of the work that filtered evaluation did, for cost checks and profiles.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -82,6 +82,56 @@ pub struct EvalScratch {
     work: Work,
     /// Per-node counting and sampled timing on (the default); off only to measure their cost.
     instrumented: bool,
+    /// Per node: evaluations where this node was the first to give a value that is not finite.
+    nonfinite: Vec<u64>,
+    /// The origin of the most recent evaluation that went non-finite, until taken.
+    latest_nonfinite: Option<NonFinite>,
+}
+
+/// Where a graph evaluation first produced a value that is not finite: the node whose inputs were
+/// all finite but whose output was not (a bug in its filtering rule: every node is meant to be
+/// total), and the footprint it was evaluated at.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct NonFinite {
+    /// The node.
+    pub node: NodeId,
+    /// The footprint's centre.
+    pub uv: Vec2,
+    /// The footprint's standard deviation along its major axis, in uv units (0 at a point).
+    pub sigma: f32,
+}
+
+impl NonFinite {
+    /// `node `NAME` (CATEGORY) at uv (u, v), footprint σ S uv` for messages.
+    pub fn describe(&self, graph: &Graph) -> String {
+        format!(
+            "node `{}` ({}) at uv ({}, {}), footprint σ {:.3e} uv",
+            graph.node_name(self.node),
+            graph.node_category(self.node),
+            self.uv.x,
+            self.uv.y,
+            self.sigma
+        )
+    }
+}
+
+/// Whether every used channel of `v` is finite (mean, gradient, variance).
+#[inline]
+pub fn is_finite(v: &Filtered) -> bool {
+    // One sum per channel: any infinity or NaN makes it non-finite (an overflowing sum of finite
+    // parts is checked part by part).
+    v.ch[..v.n()].iter().all(|c| {
+        (c.mean + c.grad.x + c.grad.y + c.var).is_finite()
+            || (c.mean.is_finite() && c.grad.is_finite() && c.var.is_finite())
+    })
+}
+
+/// The standard deviation of `cov` along its major axis.
+fn major_sigma(cov: Mat2) -> f32 {
+    let (a, b, d) = (cov.x_axis.x, cov.x_axis.y, cov.y_axis.y);
+    let h = 0.5 * (a + d);
+    let r = (0.25 * (a - d) * (a - d) + b * b).sqrt();
+    (h + r).max(0.0).sqrt()
 }
 
 /// Sampled self-time of each node split by a caller-chosen bin (a profiler labels each
@@ -116,11 +166,32 @@ pub struct EvalStats {
     pub timed_ns: Vec<u64>,
     /// Per node: number of timed evaluations (one in [`TIMING_PERIOD`]).
     pub timed: Vec<u64>,
+    /// Per node: evaluations in which it was the first node to give a non-finite value.
+    pub nonfinite: Vec<u64>,
     /// Work counters.
     pub work: Work,
 }
 
+fn add_into(into: &mut Vec<u64>, from: &[u64]) {
+    if into.len() < from.len() {
+        into.resize(from.len(), 0);
+    }
+    for (a, b) in into.iter_mut().zip(from) {
+        *a += b;
+    }
+}
+
 impl EvalStats {
+    /// Adds another set of statistics of the same graph (sizing on first use).
+    pub fn merge(&mut self, o: &EvalStats) {
+        add_into(&mut self.evaluations, &o.evaluations);
+        add_into(&mut self.lookups, &o.lookups);
+        add_into(&mut self.timed_ns, &o.timed_ns);
+        add_into(&mut self.timed, &o.timed);
+        add_into(&mut self.nonfinite, &o.nonfinite);
+        self.work.merge(&o.work);
+    }
+
     /// Estimated seconds spent evaluating node `i`: its evaluations times the mean of its timed
     /// ones.
     pub fn estimated_seconds(&self, i: usize) -> f64 {
@@ -146,6 +217,8 @@ impl EvalScratch {
             binned: BinnedTimings { period: TIMING_PERIOD, ..BinnedTimings::default() },
             work: Work::default(),
             instrumented: true,
+            nonfinite: vec![0; n],
+            latest_nonfinite: None,
         }
     }
 
@@ -192,37 +265,36 @@ impl EvalScratch {
         self.work
     }
 
+    /// Per node: the evaluations in which it was the first node to give a non-finite value.
+    pub fn nonfinite(&self) -> &[u64] {
+        &self.nonfinite
+    }
+
+    /// The origin of the most recent evaluation that went non-finite since the last call, if
+    /// any (and forgets it).
+    #[inline]
+    pub fn take_nonfinite(&mut self) -> Option<NonFinite> {
+        self.latest_nonfinite.take()
+    }
+
     /// Zeroes the statistics.
     pub fn reset_stats(&mut self) {
         self.evaluations.fill(0);
         self.lookups.fill(0);
         self.timed_ns.fill(0);
         self.timed.fill(0);
+        self.nonfinite.fill(0);
+        self.latest_nonfinite = None;
         self.work = Work::default();
     }
 
     /// Adds this scratch's statistics to `stats` (sized on first use).
     pub fn merge_stats_into(&self, stats: &mut EvalStats) {
-        if stats.evaluations.len() < self.evaluations.len() {
-            stats.evaluations.resize(self.evaluations.len(), 0);
-            stats.lookups.resize(self.lookups.len(), 0);
-        }
-        if stats.timed.len() < self.timed.len() {
-            stats.timed.resize(self.timed.len(), 0);
-            stats.timed_ns.resize(self.timed_ns.len(), 0);
-        }
-        for (a, b) in stats.timed.iter_mut().zip(&self.timed) {
-            *a += b;
-        }
-        for (a, b) in stats.timed_ns.iter_mut().zip(&self.timed_ns) {
-            *a += b;
-        }
-        for (a, b) in stats.evaluations.iter_mut().zip(&self.evaluations) {
-            *a += b;
-        }
-        for (a, b) in stats.lookups.iter_mut().zip(&self.lookups) {
-            *a += b;
-        }
+        add_into(&mut stats.evaluations, &self.evaluations);
+        add_into(&mut stats.lookups, &self.lookups);
+        add_into(&mut stats.timed_ns, &self.timed_ns);
+        add_into(&mut stats.timed, &self.timed);
+        add_into(&mut stats.nonfinite, &self.nonfinite);
         stats.work.merge(&self.work);
     }
 }
@@ -343,6 +415,7 @@ impl Graph {
         let point =
             is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].category == "heighttonormal");
         let mut ins = [Filtered::zero(ValueType::Float); nodes::MAX_INPUTS];
+        let mut poisoned = false;
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];
             let node = &self.nodes[id.0 as usize];
@@ -364,6 +437,13 @@ impl Graph {
                     b.ns[i * b.bins + b.current] += ns;
                     b.count[i * b.bins + b.current] += 1;
                 }
+            }
+            if !poisoned && !is_finite(&v) {
+                // The first non-finite value of this evaluation: its node is the origin (every
+                // input was finite). Downstream nodes carry it on and are not counted.
+                poisoned = true;
+                scratch.nonfinite[i] += 1;
+                scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
             }
             scratch.values[i] = v;
             scratch.evaluations[i] += scratch.instrumented as u64;

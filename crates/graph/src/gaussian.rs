@@ -241,6 +241,15 @@ pub fn step_moments(c: f64, m: f64, s: f64) -> (f64, f64, f64) {
     (p, p * (1.0 - p), pdf(z) / s)
 }
 
+/// The whole numbers `lo, lo + 1, …, hi` (`lo`, `hi` whole; none if `hi < lo`), at most 4097:
+/// the cells a footprint covers. Counted in integers, so that the loop ends even where f64 no
+/// longer tells `k` from `k + 1` (callers reach a few dozen cells).
+#[inline]
+pub fn cells(lo: f64, hi: f64) -> impl Iterator<Item = f64> {
+    let n = if hi >= lo { (hi - lo).min(4096.0) as u32 + 1 } else { 0 };
+    (0..n).map(move |i| lo + i as f64)
+}
+
 /// `E[sin(X)]`, `E[cos(X)]` for `X ~ N(m, s²)`: attenuated by `e^{−s²/2}`.
 pub fn sin_cos_expectation(m: f64, s: f64) -> (f64, f64) {
     let a = (-0.5 * s * s).exp();
@@ -261,13 +270,12 @@ pub fn square_wave_expectation(m: f64, s: f64) -> (f64, f64) {
         let lo = (m - 7.0 * s).floor();
         let hi = (m + 7.0 * s).floor();
         let (mut e, mut de) = (0.0, 0.0);
-        let mut k = lo;
-        while k <= hi {
+        // Counted in integers: far out, `k + 1` would equal `k` and never pass `hi`.
+        for k in cells(lo, hi) {
             let sign = if (k as i64).rem_euclid(2) == 0 { 1.0 } else { -1.0 };
             let (a, b) = ((k - m) / s, (k + 1.0 - m) / s);
             e += sign * mass(a, b);
             de += sign * (pdf(a) - pdf(b)) / s;
-            k += 1.0;
         }
         (e, de)
     } else if s < 3.5 {
@@ -369,8 +377,8 @@ pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
     let n_max = out.len();
     if s < 0.4 {
         let reach = 10.0 + (2.0 * n_max as f64).sqrt();
-        let mut k = (m - reach * s).ceil();
-        while k <= m + reach * s {
+        let k0 = (m - reach * s).ceil();
+        for k in cells(k0, (m + reach * s).floor()) {
             let z = (k - m) / s;
             let jump = if (k as i64).rem_euclid(2) == 0 { 2.0 } else { -2.0 };
             let w = jump * pdf(z);
@@ -380,7 +388,6 @@ pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
                 let h2 = z * h1 - (i + 1) as f64 * h0;
                 (h0, h1) = (h1, h2);
             }
-            k += 1.0;
         }
     } else {
         let mut j = 1.0;
@@ -449,26 +456,28 @@ pub const CHECKER_MAX_CROSSINGS: usize = 96;
 fn checker_line(o: [f64; 2], d: [f64; 2]) -> Option<f64> {
     const T: f64 = 6.0;
     // Crossings of each axis, as an increasing arithmetic progression in t: (first, step, count).
-    let axis = |o: f64, d: f64| -> (f64, f64, usize) {
+    let axis = |o: f64, d: f64| -> (f64, f64, f64) {
         if d.abs() < 1e-12 {
-            return (0.0, 0.0, 0);
+            return (0.0, 0.0, 0.0);
         }
         // floor(o + d t) changes at every integer k in (min, max] of o + d t over [−T, T]
         // (a decreasing coordinate leaves k just after reaching it).
         let (lo, hi) = ((o - d.abs() * T).floor() + 1.0, (o + d.abs() * T).floor());
         if hi < lo {
-            return (0.0, 0.0, 0);
+            return (0.0, 0.0, 0.0);
         }
-        let count = (hi - lo) as usize + 1;
+        // Counted in f64: far from the origin the count can exceed any integer type.
+        let count = hi - lo + 1.0;
         // t = (k − o)/d, increasing in k for d > 0, decreasing for d < 0.
         let first = if d > 0.0 { (lo - o) / d } else { (hi - o) / d };
         (first, 1.0 / d.abs(), count)
     };
     let (u0, ustep, un) = axis(o[0], d[0]);
     let (v0, vstep, vn) = axis(o[1], d[1]);
-    if un + vn > CHECKER_MAX_CROSSINGS {
+    if !(un + vn <= CHECKER_MAX_CROSSINGS as f64) {
         return None;
     }
+    let (un, vn) = (un as usize, vn as usize);
     let parity = |x: f64| if (x.floor() as i64).rem_euclid(2) == 0 { 1.0 } else { -1.0 };
     // The parity at t = −T, before every crossing counted (below −T lies under 1e-9 of the mass).
     let mut sign = parity(o[0] - d[0] * T) * parity(o[1] - d[1] * T);

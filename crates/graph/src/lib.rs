@@ -75,7 +75,9 @@ pub mod value;
 
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
-pub use eval::{BinnedTimings, EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, Work, TIMING_PERIOD};
+pub use eval::{
+    BinnedTimings, EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, NonFinite, Work, TIMING_PERIOD,
+};
 pub use graph::{GeomProp, Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
 pub use matrix::Matrix;
 pub use mtlx::{parse_value, Document, LoadOptions, MaterialBinding, MaterialSource};

@@ -14,29 +14,36 @@ use glam::Vec2;
 /// Estimated covariance of two channels over the footprint.
 #[inline]
 pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
-    let c = fp.quad(a.grad, b.grad);
-    let bound = (a.var.max(0.0) * b.var.max(0.0)).sqrt();
-    c.clamp(-bound, bound)
+    // In f64: huge gradients must not overflow into ∞ − ∞.
+    let (g, h) = (a.grad.as_dvec2(), b.grad.as_dvec2());
+    let s = fp.cov.as_dmat2();
+    let c = g.dot(s * h);
+    let bound = (a.var.max(0.0) as f64 * b.var.max(0.0) as f64).sqrt();
+    // max/min rather than clamp: no panic should a bound be NaN.
+    sat(c.max(-bound).min(bound))
 }
 
 /// `k a + c`.
 #[inline]
 pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
-    Moments { mean: k * a.mean + c, grad: a.grad * k, var: k * k * a.var }
+    let (k, m) = (sat64(k as f64), a.mean as f64);
+    Moments { mean: sat(k * m + c as f64), grad: scale_grad(a.grad, k), var: sat(k * k * a.var as f64) }
 }
 
 /// `a + k b`.
 #[inline]
 pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
-    let c = cov(&a, &b, fp);
+    let c = cov(&a, &b, fp) as f64;
+    let k = k as f64;
+    let g = scale_grad(b.grad, k);
     Moments {
-        mean: a.mean + k * b.mean,
-        grad: a.grad + b.grad * k,
-        var: (a.var + k * k * b.var + 2.0 * k * c).max(0.0),
+        mean: sat(a.mean as f64 + k * b.mean as f64),
+        grad: Vec2::new(sat(a.grad.x as f64 + g.x as f64), sat(a.grad.y as f64 + g.y as f64)),
+        var: sat((a.var as f64 + k * k * b.var as f64 + 2.0 * k * c).max(0.0)),
     }
 }
 
-/// `a · b` for jointly Gaussian operands.
+/// `a · b` for jointly Gaussian operands (in f64, saturated to the f32 range).
 #[inline]
 pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
     if b.var == 0.0 && b.grad == Vec2::ZERO {
@@ -45,12 +52,13 @@ pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
     if a.var == 0.0 && a.grad == Vec2::ZERO {
         return affine(b, a.mean, 0.0);
     }
-    let c = cov(&a, &b, fp);
+    let c = cov(&a, &b, fp) as f64;
+    let (am, bm, av, bv) = (a.mean as f64, b.mean as f64, a.var as f64, b.var as f64);
+    let (ga, gb) = (scale_grad(a.grad, bm), scale_grad(b.grad, am));
     Moments {
-        mean: a.mean * b.mean + c,
-        grad: a.grad * b.mean + b.grad * a.mean,
-        var: (a.mean * a.mean * b.var + b.mean * b.mean * a.var + 2.0 * a.mean * b.mean * c + a.var * b.var + c * c)
-            .max(0.0),
+        mean: sat(am * bm + c),
+        grad: Vec2::new(sat(ga.x as f64 + gb.x as f64), sat(ga.y as f64 + gb.y as f64)),
+        var: sat((am * am * bv + bm * bm * av + 2.0 * am * bm * c + av * bv + c * c).max(0.0)),
     }
 }
 
@@ -65,7 +73,54 @@ pub fn mix(bg: Moments, fg: Moments, t: Moments, fp: &Footprint) -> Moments {
 /// gradient through `x`'s.
 #[inline]
 pub fn chain(x: Moments, (mean, var, dmean): (f64, f64, f64)) -> Moments {
-    Moments { mean: mean as f32, grad: x.grad * dmean as f32, var: var as f32 }
+    Moments { mean: sat(mean), grad: scale_grad(x.grad, dmean), var: sat(var) }
+}
+
+/// `x` as an `f32`, saturated to ±`f32::MAX` (NaN stays NaN): the overflow rule of every node.
+#[inline]
+pub fn sat(x: f64) -> f32 {
+    x.clamp(-(f32::MAX as f64), f32::MAX as f64) as f32
+}
+
+/// `x / y`, total: 0 where `y = 0` (OSL's convention, shared by every node that divides).
+#[inline]
+pub fn safe_div(x: f64, y: f64) -> f64 {
+    if y == 0.0 {
+        0.0
+    } else {
+        sat64(x / y)
+    }
+}
+
+/// `x` clamped to the f32 range, staying in f64 (NaN stays NaN): for intermediate values of
+/// point functions, so that a later `0 · x` or `x − x` cannot make a NaN of an overflow.
+#[inline]
+pub fn sat64(x: f64) -> f64 {
+    x.clamp(-(f32::MAX as f64), f32::MAX as f64)
+}
+
+/// `1 / x` with [`safe_div`]'s rule (0 at 0), in f32.
+#[inline]
+pub fn recip(x: f32) -> f32 {
+    if x == 0.0 {
+        0.0
+    } else {
+        sat(1.0 / x as f64)
+    }
+}
+
+/// `g + h`, saturated.
+#[inline]
+pub fn add_grad(g: Vec2, h: Vec2) -> Vec2 {
+    Vec2::new(sat(g.x as f64 + h.x as f64), sat(g.y as f64 + h.y as f64))
+}
+
+/// `g · k` for a gradient `g` and a slope `k`, in f64 then saturated: a zero gradient stays zero
+/// whatever the slope (never `0 · ∞`).
+#[inline]
+pub fn scale_grad(g: Vec2, k: f64) -> Vec2 {
+    let one = |x: f32| if x == 0.0 { 0.0 } else { sat(x as f64 * k) };
+    Vec2::new(one(g.x), one(g.y))
 }
 
 /// A nonlinear function of one channel, `f`, with its derivative `df` (for the point case):
@@ -75,9 +130,10 @@ pub fn unary(x: Moments, f: impl Fn(f64) -> f64, df: impl Fn(f64) -> f64) -> Mom
     let m = x.mean as f64;
     let s = x.sigma() as f64;
     if s == 0.0 {
-        return Moments { mean: f(m) as f32, grad: x.grad * df(m) as f32, var: 0.0 };
+        return Moments { mean: sat(f(m)), grad: scale_grad(x.grad, df(m)), var: 0.0 };
     }
-    chain(x, gaussian::hermite_stein(f, m, s))
+    // Values in the f32 range (saturated), so that the rule's sums of squares stay finite.
+    chain(x, gaussian::hermite_stein(|v| sat64(f(v)), m, s))
 }
 
 /// Maximum number of channels [`nary`] combines.
@@ -95,6 +151,9 @@ pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
     }
     let n = xs.len();
     let varying = xs.iter().filter(|x| x.var > 0.0).count();
+    // Every value of f is taken in the f32 range (saturated), so that sums of squares stay
+    // finite in f64.
+    let f = |q: &[f64]| f(q).clamp(-(f32::MAX as f64), f32::MAX as f64);
     let f0 = f(&p[..n]);
     let mut grad = Vec2::ZERO;
     if varying == 0 {
@@ -107,10 +166,10 @@ pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
                 p[k] = mk - h;
                 let fm = f(&p[..n]);
                 p[k] = mk;
-                grad += xs[k].grad * ((fp - fm) / (2.0 * h)) as f32;
+                grad = add_grad(grad, scale_grad(xs[k].grad, (fp - fm) / (2.0 * h)));
             }
         }
-        return Moments { mean: f0 as f32, grad, var: 0.0 };
+        return Moments { mean: sat(f0), grad, var: 0.0 };
     }
     let r = (varying as f64).sqrt();
     let w = 0.5 / varying as f64;
@@ -128,9 +187,9 @@ pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
         p[k] = mk;
         e += w * (fp + fm);
         e2 += w * (fp * fp + fm * fm);
-        grad += xs[k].grad * ((fp - fm) / (2.0 * d)) as f32;
+        grad = add_grad(grad, scale_grad(xs[k].grad, (fp - fm) / (2.0 * d)));
     }
-    Moments { mean: e as f32, grad, var: (e2 - e * e).max(0.0) as f32 }
+    Moments { mean: sat(e), grad, var: sat((e2 - e * e).max(0.0)) }
 }
 
 /// `E`, `E²` and `dE/dm` of `frac(X)` (`x − floor x`).
@@ -144,8 +203,7 @@ pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
         let lo = (m - 7.0 * s).floor();
         let hi = (m + 7.0 * s).floor();
         let (mut e, mut e2, mut de) = (0.0, 0.0, 0.0);
-        let mut k = lo;
-        while k <= hi {
+        for k in gaussian::cells(lo, hi) {
             // frac = x − k on [k, k+1).
             let p1 = gaussian::poly(&[-k, 1.0]);
             let p2 = gaussian::poly(&[k * k, -2.0 * k, 1.0]);
@@ -153,7 +211,6 @@ pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
             e2 += gaussian::poly_expectation(&p2, k, k + 1.0, m, s);
             // d/dm: slope 1 inside, minus the jump of 1 at each integer k+1 weighted by density.
             de += gaussian::mass((k - m) / s, (k + 1.0 - m) / s) - gaussian::pdf((k + 1.0 - m) / s) / s;
-            k += 1.0;
         }
         (e, e2, de)
     } else {

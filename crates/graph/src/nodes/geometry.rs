@@ -353,11 +353,12 @@ fn place2d(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         let trs = ins[5].ch[0].mean >= 1.0;
         let (x, y) = (affine(t.ch[0], 1.0, -pivot.x), affine(t.ch[1], 1.0, -pivot.y));
         let (x, y) = if !trs {
-            let (x, y) = rotate(affine(x, 1.0 / scale.x, 0.0), affine(y, 1.0 / scale.y, 0.0), deg, ctx);
+            let (x, y) =
+                rotate(affine(x, moments::recip(scale.x), 0.0), affine(y, moments::recip(scale.y), 0.0), deg, ctx);
             (affine(x, 1.0, -offset.x), affine(y, 1.0, -offset.y))
         } else {
             let (x, y) = rotate(affine(x, 1.0, -offset.x), affine(y, 1.0, -offset.y), deg, ctx);
-            (affine(x, 1.0 / scale.x, 0.0), affine(y, 1.0 / scale.y, 0.0))
+            (affine(x, moments::recip(scale.x), 0.0), affine(y, moments::recip(scale.y), 0.0))
         };
         out.ch[0] = affine(x, 1.0, pivot.x);
         out.ch[1] = affine(y, 1.0, pivot.y);
@@ -429,11 +430,11 @@ fn place2d_point(p: &[f64]) -> [f64; 2] {
     let (s, c) = p[6].to_radians().sin_cos();
     let rot = |x: f64, y: f64| (c * x + s * y, -s * x + c * y);
     let (x, y) = if p[9] < 1.0 {
-        let (x, y) = rot(x / p[4], y / p[5]);
+        let (x, y) = rot(moments::safe_div(x, p[4]), moments::safe_div(y, p[5]));
         (x - p[7], y - p[8])
     } else {
         let (x, y) = rot(x - p[7], y - p[8]);
-        (x / p[4], y / p[5])
+        (moments::safe_div(x, p[4]), moments::safe_div(y, p[5]))
     };
     [x + p[2], y + p[3]]
 }

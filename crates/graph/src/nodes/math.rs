@@ -27,7 +27,9 @@
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{self, poly, poly_shift_scale, Piece};
 use crate::graph::Source;
-use crate::moments::{add_scaled, affine, chain, frac_moments, mix, mul, nary, unary};
+use crate::moments::{
+    add_scaled, affine, chain, frac_moments, mix, mul, nary, safe_div, sat, sat64, scale_grad, unary,
+};
 use crate::value::{Filtered, Footprint, Moments, ValueType};
 use glam::Vec2;
 
@@ -386,31 +388,75 @@ fn sin_of(x: Moments, cosine: bool) -> Moments {
 fn exp_of(x: Moments) -> Moments {
     let (m, v) = (x.mean as f64, x.var as f64);
     let e = (m + 0.5 * v).exp();
-    Moments { mean: e as f32, grad: x.grad * e as f32, var: (((v).exp() - 1.0) * e * e) as f32 }
+    // (e^v − 1) e², saturated like every node's output (and 0 without spread, even where e²
+    // overflows).
+    // In logs, e^{2m + v} (e^v − 1), so that a vanishing e and a huge e^v make no 0 · ∞.
+    let var = if v > 0.0 {
+        let ln_expm1 = if v > 30.0 { v } else { v.exp_m1().ln() };
+        sat((2.0 * m + v + ln_expm1).exp())
+    } else {
+        0.0
+    };
+    Moments { mean: sat(e), grad: scale_grad(x.grad, e), var }
 }
 
 /// GLSL-style `mod(x, y) = x − y floor(x / y)`.
 fn modulo(a: Moments, b: Moments, fp: &Footprint) -> Moments {
-    if uniform(&b) && b.mean != 0.0 {
+    if uniform(&b) {
+        if b.mean == 0.0 {
+            return Moments::constant(0.0);
+        }
         let q = floor_of(affine(a, 1.0 / b.mean, 0.0));
         return add_scaled(a, q, -b.mean, fp);
     }
-    nary(&[a, b], |p| p[0] - p[1] * (p[0] / p[1]).floor())
+    nary(&[a, b], |p| if p[1] == 0.0 { 0.0 } else { p[0] - p[1] * (p[0] / p[1]).floor() })
+}
+
+/// `power`'s total definition (OSL's `safe_pow`): `x^0 = 1`, `0^y = 0` otherwise, a negative base
+/// gives `x^y` for whole exponents and 0 for fractional ones; `safepower` is `sign(x) |x|^y` with
+/// the same rule at 0.
+#[inline]
+pub(crate) fn power_point(x: f64, y: f64, safe: bool) -> f64 {
+    if UNGUARDED_POWER.with(|u| u.get()) {
+        return x.powf(y);
+    }
+    if y == 0.0 {
+        1.0
+    } else if x == 0.0 {
+        0.0
+    } else if safe {
+        sat64(x.signum() * x.abs().powf(y))
+    } else if x < 0.0 && y.fract() != 0.0 {
+        0.0
+    } else {
+        sat64(x.powf(y))
+    }
+}
+
+thread_local! {
+    /// A mutation switch for the totality fuzzer's own test: on this thread, `power` loses its
+    /// domain guard (a negative base with a fractional exponent is NaN again), so that the test
+    /// can show the fuzzer finds the NaN. Never set outside that test.
+    static UNGUARDED_POWER: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+}
+
+/// Turns `power`'s domain guard off (or back on) on the calling thread; see the fuzzer's test.
+#[doc(hidden)]
+pub fn set_unguarded_power(on: bool) {
+    UNGUARDED_POWER.with(|u| u.set(on));
 }
 
 fn power(a: Moments, b: Moments, safe: bool) -> Moments {
-    let f = move |x: f64, y: f64| {
-        if safe {
-            x.signum() * x.abs().powf(y)
-        } else {
-            x.powf(y)
-        }
-    };
     if uniform(&b) {
         let y = b.mean as f64;
-        unary(a, move |x| f(x, y), move |x| if x == 0.0 { 0.0 } else { y * f(x, y) / x })
+        // The derivative of x^y is y x^(y−1) = y f(x)/x away from 0; at 0 it is taken as 0.
+        unary(
+            a,
+            move |x| power_point(x, y, safe),
+            move |x| if x == 0.0 { 0.0 } else { y * power_point(x, y, safe) / x },
+        )
     } else {
-        nary(&[a, b], move |p| f(p[0], p[1]))
+        nary(&[a, b], move |p| power_point(p[0], p[1], safe))
     }
 }
 
@@ -424,9 +470,13 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
         Multiply => mul(a, x[1], fp),
         Divide => {
             if uniform(&x[1]) {
-                affine(a, 1.0 / x[1].mean, 0.0)
+                if x[1].mean == 0.0 {
+                    Moments::constant(0.0)
+                } else {
+                    affine(a, 1.0 / x[1].mean, 0.0)
+                }
             } else {
-                nary(&[a, x[1]], |p| p[0] / p[1])
+                nary(&[a, x[1]], |p| safe_div(p[0], p[1]))
             }
         }
         Modulo => modulo(a, x[1], fp),
@@ -486,18 +536,18 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
         }
         Remap => {
             if x[1..5].iter().all(uniform) {
-                let (il, ih, ol, oh) = (x[1].mean, x[2].mean, x[3].mean, x[4].mean);
-                let k = (oh - ol) / (ih - il);
-                affine(a, k, ol - il * k)
+                let (il, ih, ol, oh) = (x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64);
+                let k = safe_div(oh - ol, ih - il);
+                affine(a, k as f32, (ol - il * k) as f32)
             } else {
-                nary(&x[..5], |p| p[3] + (p[0] - p[1]) * (p[4] - p[3]) / (p[2] - p[1]))
+                nary(&x[..5], |p| p[3] + safe_div((p[0] - p[1]) * (p[4] - p[3]), p[2] - p[1]))
             }
         }
         Range => {
             let doclamp = x[6].mean >= 0.5;
             let f = move |p: &[f64]| {
-                let t = (p[0] - p[1]) / (p[2] - p[1]);
-                let t = t.signum() * t.abs().powf(1.0 / p[3]);
+                let t = safe_div(p[0] - p[1], p[2] - p[1]);
+                let t = power_point(t, safe_div(1.0, p[3]), true);
                 let r = p[4] + t * (p[5] - p[4]);
                 if doclamp {
                     r.clamp(p[4].min(p[5]), p[4].max(p[5]))
@@ -509,8 +559,8 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
                 let p: [f64; 6] =
                     [0.0, x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64, x[5].mean as f64];
                 if p[3] == 1.0 && !doclamp {
-                    let k = ((p[5] - p[4]) / (p[2] - p[1])) as f32;
-                    return affine(a, k, p[4] as f32 - p[1] as f32 * k);
+                    let k = safe_div(p[5] - p[4], p[2] - p[1]);
+                    return affine(a, k as f32, (p[4] - p[1] * k) as f32);
                 }
                 unary(
                     a,

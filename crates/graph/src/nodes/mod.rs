@@ -18,6 +18,9 @@ pub(crate) mod normal;
 pub(crate) mod pattern;
 pub(crate) mod shape;
 
+#[doc(hidden)]
+pub use math::set_unguarded_power;
+
 use crate::eval::Work;
 use crate::graph::{GeomProp, Source};
 use crate::value::{Filtered, Footprint, Value, ValueType};
@@ -272,7 +275,22 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
             c.grad = glam::Vec2::ZERO;
         }
     }
+    saturate(&mut out);
     out
+}
+
+/// The overflow rule every node shares: a mean or gradient beyond the largest finite `f32`
+/// saturates to ±`f32::MAX`, a variance to `f32::MAX`. Finite inputs thus never become infinite
+/// on the way through a graph (`exp(100)`, `x / 1e-40`, a product of two huge values), while a
+/// NaN stays NaN so that the evaluator can report the node that made it.
+#[inline]
+fn saturate(v: &mut Filtered) {
+    const M: f32 = f32::MAX;
+    for c in v.ch.iter_mut() {
+        c.mean = c.mean.clamp(-M, M);
+        c.grad = glam::Vec2::new(c.grad.x.clamp(-M, M), c.grad.y.clamp(-M, M));
+        c.var = c.var.clamp(0.0, M);
+    }
 }
 
 /// Whether the operation itself reads the shading point's geometry beyond uv (position, normal,

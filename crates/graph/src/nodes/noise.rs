@@ -277,7 +277,7 @@ pub(super) fn gradient3(h: u32, x: f32, y: f32, z: f32) -> f32 {
 /// MaterialX `mx_perlin_noise_float(vec3)` (f32, as GLSL computes it).
 pub fn perlin3_float(p: [f32; 3]) -> f32 {
     let (x0, y0, z0) = (ifloor(p[0]), ifloor(p[1]), ifloor(p[2]));
-    let (fx, fy, fz) = (p[0] - x0 as f32, p[1] - y0 as f32, p[2] - z0 as f32);
+    let (fx, fy, fz) = (p[0] - p[0].floor(), p[1] - p[1].floor(), p[2] - p[2].floor());
     let (u, v, w) = (fade(fx), fade(fy), fade(fz));
     let g = |dx: i32, dy: i32, dz: i32| {
         let h = hash::hash3(x0.wrapping_add(dx), y0.wrapping_add(dy), z0.wrapping_add(dz));
@@ -301,7 +301,9 @@ fn perlin_point(p: Vec2, sel: HashSel) -> f32 {
         return perlin3_float([p.x, p.y, z]);
     }
     let (x0, y0) = (ifloor(p.x), ifloor(p.y));
-    let (fx, fy) = (p.x - x0 as f32, p.y - y0 as f32);
+    // The fraction from f32's own floor: the same as `p − x0` wherever `x0` fits an i32, and 0
+    // (a lattice point, where the noise is 0) beyond, where every f32 is a whole number.
+    let (fx, fy) = (p.x - p.x.floor(), p.y - p.y.floor());
     let (u, v) = (fade(fx), fade(fy));
     let h = |dx: i32, dy: i32| sel.pick(hash::hash2(x0.wrapping_add(dx), y0.wrapping_add(dy)));
     let v0 = gradient(h(0, 0), fx, fy);
@@ -566,6 +568,14 @@ fn perlin_octave(
     ctx: &mut Ctx,
 ) -> bool {
     ctx.work.octaves += 1;
+    if offsets.iter().any(|o| !within_lattice_precision(p + *o)) {
+        // Where f32 coordinates are all whole numbers, every point is a lattice point and the
+        // noise is 0 (the point evaluation's own result, and the total rule for any footprint).
+        for o in out.iter_mut() {
+            *o = Moments::default();
+        }
+        return true;
+    }
     if s.x.max(s.y) < PERLIN_SIGMA_POINT {
         for (k, sel) in sels.iter().enumerate() {
             let q = p + offsets[k];
@@ -625,6 +635,16 @@ fn perlin_octave(
     true
 }
 
+/// Beyond this magnitude an f32 coordinate has no fraction: Perlin noise is 0 there.
+pub(crate) const LATTICE_PRECISION_LIMIT: f64 = 16_777_216.0;
+
+/// Whether f32 resolves the lattice cell of a noise-space coordinate (`|x|, |y|` below
+/// [`LATTICE_PRECISION_LIMIT`]; false for NaN too).
+#[inline]
+pub(crate) fn within_lattice_precision(p: DVec2) -> bool {
+    p.x.abs() < LATTICE_PRECISION_LIMIT && p.y.abs() < LATTICE_PRECISION_LIMIT
+}
+
 /// Hash selections and coordinate offsets per output channel.
 fn channel_layout(ty: ValueType, fractal: bool) -> ([HashSel; 4], [DVec2; 4], usize) {
     let off = if fractal { DVec2::new(19.0, 193.0) } else { DVec2::new(19.0, 73.0) };
@@ -649,7 +669,9 @@ fn coordinate(t: &Filtered) -> (DVec2, DVec2, [Vec2; 2]) {
 /// Maps a noise-space gradient to a uv gradient.
 #[inline]
 fn to_uv(m: &Moments, j: &[Vec2; 2]) -> Moments {
-    Moments { mean: m.mean, grad: j[0] * m.grad.x + j[1] * m.grad.y, var: m.var }
+    use crate::moments::{add_grad, scale_grad};
+    let grad = add_grad(scale_grad(j[0], m.grad.x as f64), scale_grad(j[1], m.grad.y as f64));
+    Moments { mean: m.mean, grad, var: m.var }
 }
 
 fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
@@ -666,6 +688,15 @@ fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     out
 }
 
+/// Whether a fractal octave of amplitude `a` and frequency `f` is summed. Octaves stop once the
+/// amplitude leaves [1e-30, 1e30] (below, nothing an f32 sum can hold; above, beyond where a
+/// value saturates) or the frequency leaves the f32 range (where every coordinate is a lattice
+/// point and the noise is 0): the fractals' total rule, which also bounds their work.
+#[inline]
+pub(crate) fn octave_counts(a: f64, f: f64) -> bool {
+    (1e-30..=1e30).contains(&a.abs()) && f.abs() <= f32::MAX as f64
+}
+
 /// `Σ (a·dimʲ)²` over the `remaining` octaves after one of amplitude `a`: the variance weight
 /// of the octaves a fractal drops (each is fully filtered to its mean), stopping once the
 /// amplitudes fall below 1e-4.
@@ -673,7 +704,7 @@ pub(crate) fn remaining_power(a: f64, dim: f64, remaining: i32) -> f64 {
     let mut rest = 0.0;
     let mut ai = a * dim;
     for _ in 0..remaining.clamp(0, 64) {
-        if ai.abs() < 1e-4 {
+        if !(1e-4..=1e30).contains(&ai.abs()) {
             break;
         }
         rest += ai * ai;
@@ -721,10 +752,18 @@ fn fractal_sum(
         }
         a *= dim;
         f *= lac;
+        if !octave_counts(a, f) {
+            break;
+        }
     }
     let mut out = [Moments::default(); 4];
     for k in 0..n {
-        out[k] = Moments { mean: acc[k].0 as f32, grad: acc[k].1.as_vec2(), var: acc[k].2 as f32 };
+        let (m, g, v) = acc[k];
+        out[k] = Moments {
+            mean: crate::moments::sat(m),
+            grad: Vec2::new(crate::moments::sat(g.x), crate::moments::sat(g.y)),
+            var: crate::moments::sat(v),
+        };
     }
     out
 }
@@ -746,13 +785,16 @@ fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
 
 /// Unfiltered fractal noise (for tests and the point path).
 pub fn fractal_point(p: Vec2, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
-    let (mut r, mut a, mut q) = (0.0, 1.0, p);
+    let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
     for _ in 0..octaves {
-        r += a * perlin_point(q, HashSel::Full);
-        a *= diminish;
+        if !(octave_counts(a, 1.0) && q.is_finite()) {
+            break;
+        }
+        r += a * perlin_point(q, HashSel::Full) as f64;
+        a *= diminish as f64;
         q *= lacunarity;
     }
-    r
+    r as f32
 }
 
 /// Unfiltered float Perlin noise at `p` (MaterialX `mx_perlin_noise_float(vec2)`).
@@ -965,6 +1007,17 @@ fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
 /// z of its `fractal3d` slice, per unit of `jitter − 1`.
 const UNIFIED_JITTER_SCALE: f32 = 90000.0;
 
+/// unifiednoise's rotation (degrees) for a `jitter`: `(jitter − 1) · 90000`, reduced modulo 360°
+/// where that overflows f32 (the total rule: an infinite angle has no sine).
+pub(crate) fn unified_spin(jitter: f32) -> f32 {
+    let spin = (jitter - 1.0) * UNIFIED_JITTER_SCALE;
+    if spin.is_finite() {
+        spin
+    } else {
+        ((jitter as f64 - 1.0) * UNIFIED_JITTER_SCALE as f64).rem_euclid(360.0) as f32
+    }
+}
+
 fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let (t, freq, off, jitter) = (&ins[0], &ins[1], &ins[2], ins[3].ch[0].mean);
     let (outmin, outmax) = (ins[4].ch[0], ins[5].ch[0]);
@@ -977,7 +1030,7 @@ fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
     for k in 0..2 {
         p.ch[k] = add_scaled(mul(t.ch[k], freq.ch[k], ctx.fp), off.ch[k], 1.0, ctx.fp);
     }
-    let spin = (jitter - 1.0) * UNIFIED_JITTER_SCALE;
+    let spin = unified_spin(jitter);
     let raw = match kind {
         0 | 1 => {
             let mut pr = p;

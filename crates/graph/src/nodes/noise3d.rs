@@ -150,7 +150,8 @@ impl Sel {
 /// `mx_perlin_noise_vec3(vec3)` (`Sel::Byte(k)`).
 fn perlin3_point(p: Vec3, sel: Sel) -> f32 {
     let (x0, y0, z0) = (ifloor(p.x), ifloor(p.y), ifloor(p.z));
-    let (fx, fy, fz) = (p.x - x0 as f32, p.y - y0 as f32, p.z - z0 as f32);
+    // Fractions from f32's own floor (0 where every f32 is whole: see `perlin_point`).
+    let (fx, fy, fz) = (p.x - p.x.floor(), p.y - p.y.floor(), p.z - p.z.floor());
     let (u, v, w) = (fade(fx), fade(fy), fade(fz));
     let g = |dx: i32, dy: i32, dz: i32| {
         let h = sel.pick(hash::hash3(x0.wrapping_add(dx), y0.wrapping_add(dy), z0.wrapping_add(dz)));
@@ -169,13 +170,16 @@ pub fn perlin3(p: Vec3) -> f32 {
 
 /// Unfiltered float 3D fractal noise (MaterialX `mx_fractal_noise_float(vec3)`).
 pub fn fractal3_point(p: Vec3, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
-    let (mut r, mut a, mut q) = (0.0, 1.0, p);
+    let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
     for _ in 0..octaves {
-        r += a * perlin3_point(q, Sel::Full);
-        a *= diminish;
+        if !(super::noise::octave_counts(a, 1.0) && q.is_finite()) {
+            break;
+        }
+        r += a * perlin3_point(q, Sel::Full) as f64;
+        a *= diminish as f64;
         q *= lacunarity;
     }
-    r
+    r as f32
 }
 
 /// Unfiltered MaterialX `mx_worley_noise_*(vec3)` (Euclidean metric): the `n` nearest
@@ -284,6 +288,14 @@ struct M3 {
 /// variance) when the footprint filters the octave out completely.
 fn perlin3_octave(p: DVec3, s: DVec3, sels: &[Sel], offsets: &[DVec3], out: &mut [M3; 4], ctx: &mut Ctx) -> bool {
     ctx.work.octaves += 1;
+    let lim = super::noise::LATTICE_PRECISION_LIMIT;
+    if offsets.iter().any(|o| !((p + *o).abs().max_element() < lim)) {
+        // Every f32 coordinate there is a lattice point, where the noise is 0.
+        for o in out.iter_mut() {
+            *o = M3::default();
+        }
+        return true;
+    }
     let smax = s.max_element();
     if smax < PERLIN_SIGMA_POINT {
         for (k, sel) in sels.iter().enumerate() {
@@ -360,11 +372,9 @@ fn coordinate(t: &Filtered) -> (DVec3, DVec3, [Vec2; 3]) {
 /// Maps noise-space moments to uv moments (the gradient through the coordinate's Jacobian).
 #[inline]
 fn to_uv(m: &M3, j: &[Vec2; 3]) -> Moments {
-    Moments {
-        mean: m.mean as f32,
-        grad: j[0] * m.grad.x as f32 + j[1] * m.grad.y as f32 + j[2] * m.grad.z as f32,
-        var: m.var as f32,
-    }
+    use crate::moments::{add_grad, sat, scale_grad};
+    let g = add_grad(add_grad(scale_grad(j[0], m.grad.x), scale_grad(j[1], m.grad.y)), scale_grad(j[2], m.grad.z));
+    Moments { mean: sat(m.mean), grad: g, var: sat(m.var) }
 }
 
 fn noise3d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
@@ -419,6 +429,9 @@ fn fractal_sum(
         }
         a *= dim;
         f *= lac;
+        if !super::noise::octave_counts(a, f) {
+            break;
+        }
     }
     acc
 }
@@ -680,7 +693,6 @@ fn worley3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
 
 /// The angle (degrees) by which `unifiednoise3d` rotates its Perlin, cell and fractal lattices
 /// per unit of `jitter − 1`, and the axis it rotates about.
-const UNIFIED_JITTER_SCALE: f32 = 90000.0;
 const UNIFIED_AXIS: [f64; 3] = [0.1, 1.0, 0.0];
 
 fn unified3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
@@ -695,7 +707,7 @@ fn unified3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
     for k in 0..3 {
         p.ch[k] = add_scaled(mul(pos.ch[k], freq.ch[k], ctx.fp), off.ch[k], 1.0, ctx.fp);
     }
-    let spin = (jitter - 1.0) * UNIFIED_JITTER_SCALE;
+    let spin = super::noise::unified_spin(jitter);
     let mut q = p;
     if spin != 0.0 {
         let m = super::geometry::rotate3d_matrix(UNIFIED_AXIS, spin as f64);

@@ -147,7 +147,8 @@ fn hexagon_point(t: Vec2, c: Vec2, r: f32) -> f32 {
     let p1 = p - 2.0 * k * k.dot(p).min(0.0);
     let mk = Vec2::new(-k.x, k.y);
     let p2 = p1 - 2.0 * mk * mk.dot(p1).min(0.0);
-    let p3 = p2 - Vec2::new(p2.x.clamp(-kz * r, kz * r), r);
+    // GLSL's clamp, min(max(x, lo), hi): total when lo > hi (a negative radius).
+    let p3 = p2 - Vec2::new(p2.x.max(-kz * r).min(kz * r), r);
     // ifgreater(sqrt(p3.x + p3.y), 0): NaN (a negative sum) compares false.
     if (p3.x + p3.y).sqrt() > 0.0 {
         0.0
@@ -448,11 +449,13 @@ fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
 fn coord(t: &Filtered, scale: DVec2, offset: DVec2) -> (DVec2, DVec2, [Vec2; 2]) {
     let m = DVec2::new(t.ch[0].mean as f64, t.ch[1].mean as f64) * scale - offset;
     let s = DVec2::new(t.ch[0].sigma() as f64, t.ch[1].sigma() as f64) * scale.abs();
-    (m, s, [t.ch[0].grad * scale.x as f32, t.ch[1].grad * scale.y as f32])
+    (m, s, [crate::moments::scale_grad(t.ch[0].grad, scale.x), crate::moments::scale_grad(t.ch[1].grad, scale.y)])
 }
 
 fn indicator(p: f64, dp: DVec2, j: &[Vec2; 2]) -> Moments {
-    Moments { mean: p as f32, grad: j[0] * dp.x as f32 + j[1] * dp.y as f32, var: (p * (1.0 - p)).max(0.0) as f32 }
+    use crate::moments::{add_grad, scale_grad};
+    let grad = add_grad(scale_grad(j[0], dp.x), scale_grad(j[1], dp.y));
+    Moments { mean: p as f32, grad, var: (p * (1.0 - p)).max(0.0) as f32 }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -475,12 +478,10 @@ fn periodic_mass(a: f64, b: f64, m: f64, s: f64) -> (f64, f64) {
         let k0 = (m - 7.0 * s - b).floor();
         let k1 = (m + 7.0 * s - a).ceil();
         let (mut p, mut d) = (0.0, 0.0);
-        let mut k = k0;
-        while k <= k1 {
+        for k in crate::gaussian::cells(k0, k1) {
             let (q, dq) = interval(k + a, k + b, m, s);
             p += q;
             d += dq;
-            k += 1.0;
         }
         (p, d)
     } else {
