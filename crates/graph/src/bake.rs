@@ -233,6 +233,20 @@ pub enum BakeError {
     },
     /// Invalid resolution or uv rectangle.
     Settings(String),
+    /// A texel's value is not finite (nothing is written): where, and the node where the
+    /// evaluation first went non-finite.
+    NonFinite {
+        /// Column from the left.
+        i: u32,
+        /// Row from the top of the image.
+        j: u32,
+        /// The texel's centre.
+        uv: Vec2,
+        /// The origin (see [`crate::eval::NonFinite::describe`]), or why none was found.
+        origin: String,
+        /// How many texels are not finite.
+        count: usize,
+    },
 }
 
 impl fmt::Display for BakeError {
@@ -248,6 +262,11 @@ impl fmt::Display for BakeError {
             }
             BakeError::Unavailable { element, reason } => write!(f, "cannot bake `{element}`: {reason}"),
             BakeError::Settings(m) => f.write_str(m),
+            BakeError::NonFinite { i, j, uv, origin, count } => write!(
+                f,
+                "{count} texel(s) are not finite (nothing written); the first, texel ({i}, {j}) at uv ({}, {}): {origin}",
+                uv.x, uv.y
+            ),
         }
     }
 }
@@ -325,6 +344,25 @@ pub fn bake(
                 },
             );
         }
+    }
+    if let Some(first) = data.iter().position(|x| !x.is_finite()) {
+        // Never a NaN texel: say where, and which node made it (evaluated again to find out).
+        let count = data.chunks_exact(n).filter(|px| px.iter().any(|x| !x.is_finite())).count();
+        let texel = (first / n) as u32;
+        let (i, j) = (texel % w, texel / w);
+        let fp = settings.footprint(i, j);
+        let origin = match source {
+            BakeSource::Output(out) => {
+                let mut scratch = EvalScratch::new(graph);
+                graph.eval_output(*out, &fp, &mut scratch);
+                match scratch.take_nonfinite() {
+                    Some(at) => at.describe(graph),
+                    None => "no node gave a non-finite value when evaluated again".into(),
+                }
+            }
+            BakeSource::Constant(_) => "the element is a constant that is not finite".into(),
+        };
+        return Err(BakeError::NonFinite { i, j, uv: fp.uv, origin, count });
     }
     Ok(BakedImage { width: w, height: h, ty, data })
 }

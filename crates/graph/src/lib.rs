@@ -31,6 +31,14 @@
 //! | normal maps (`nodes/normal.rs`) | normalmap, heighttonormal | normalmap: cubature (flat tangent frame by default); heighttonormal: the normal of the filtered height's slope (gradients are kept at point footprints for it) |
 //! | colour (`nodes/color.rs`) | luminance, saturate, contrast, rgbtohsv, hsvtorgb, hsvadjust | exact when linear; cubature otherwise |
 //!
+//! Every node is total: for finite inputs it returns finite moments at every footprint. The
+//! rules the families share (overflow saturates to ±`f32::MAX`, the moment algebra in
+//! [`moments`] works in f64, division by zero is 0, `power` is OSL's `safe_pow`, Perlin noise is
+//! 0 where f32 coordinates are whole numbers, fractal octaves stop where their amplitude or
+//! frequency overflows) are listed in the README; `tests/random_graphs.rs` fuzzes them. Should a
+//! value still go non-finite, the evaluator records the node it started at
+//! ([`EvalScratch::take_nonfinite`], [`EvalStats::nonfinite`]).
+//!
 //! Evaluation ([`eval`]) uses a per-thread [`EvalScratch`] (no allocation per evaluation),
 //! visits only the nodes the requested outputs need in topological order, and asks a
 //! [`NodeOverride`] first for each of them, so that a tile cache can replace a node by a lookup;

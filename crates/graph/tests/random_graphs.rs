@@ -355,14 +355,13 @@ fn random_graphs_are_total_and_agree_with_supersampling() {
     }
     let cont_list: Vec<String> = cont_by.iter().map(|(c, n)| format!("`{c}` {n}")).collect();
     let summary = format!(
-        "{} random graphs ({} of any nodes, {} of continuous nodes), {footprints} footprints, seed {:#x}, {:.1} s",
+        "{} random graphs ({} of any nodes, {} of continuous nodes), {footprints} footprints, seed {:#x}",
         b.graphs + b.graphs / 2,
         b.graphs,
         b.graphs / 2,
         b.seed,
-        t0.elapsed().as_secs_f64()
     );
-    println!("{summary}\n{table}");
+    println!("{summary}, {:.1} s\n{table}", t0.elapsed().as_secs_f64());
     let doc = format!(
         "# Random graphs: filtered error against supersampling\n\n\
          Written by `cargo test -p graph --release --test random_graphs` ({}).\n\n\

@@ -500,28 +500,3 @@ impl NodeOverride for GraphOverride<'_, '_> {
         Some(out)
     }
 }
-
-/// Adds `from` into `into` (per-node counts and work).
-pub fn merge_eval_stats(into: &mut graph::EvalStats, from: &graph::EvalStats) {
-    if into.evaluations.len() < from.evaluations.len() {
-        into.evaluations.resize(from.evaluations.len(), 0);
-        into.lookups.resize(from.lookups.len(), 0);
-    }
-    for (x, y) in into.evaluations.iter_mut().zip(&from.evaluations) {
-        *x += y;
-    }
-    for (x, y) in into.lookups.iter_mut().zip(&from.lookups) {
-        *x += y;
-    }
-    if into.timed.len() < from.timed.len() {
-        into.timed.resize(from.timed.len(), 0);
-        into.timed_ns.resize(from.timed_ns.len(), 0);
-    }
-    for (x, y) in into.timed.iter_mut().zip(&from.timed) {
-        *x += y;
-    }
-    for (x, y) in into.timed_ns.iter_mut().zip(&from.timed_ns) {
-        *x += y;
-    }
-    into.work.merge(&from.work);
-}

@@ -63,6 +63,10 @@ pub struct RenderOutput {
     pub counts: RenderCounts,
     /// Per scene graph: node evaluations and work counters.
     pub graph_stats: Vec<graph::EvalStats>,
+    /// The first samples whose radiance was not finite (at most
+    /// [`crate::shading::NONFINITE_KEPT`], ordered by pixel row, column and sample), with where
+    /// each came from.
+    pub nonfinite: Vec<crate::shading::NonFiniteSample>,
     /// Wall-clock time of the rendering phase.
     pub time: Duration,
 }
@@ -203,7 +207,8 @@ pub struct NoObserver;
 impl PathObserver for NoObserver {}
 
 /// A tile's pixels (radiance, footprint AOV), counters and graph statistics.
-type TileResult = (Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>);
+type TileResult =
+    (Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>, Vec<crate::shading::NonFiniteSample>);
 
 /// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
 pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
@@ -238,15 +243,17 @@ pub fn render_cached(
             progress(px.len() as u64);
             let mut stats = Vec::new();
             shade.merge_stats_into(&mut stats);
-            (px, counts, stats)
+            (px, counts, stats, std::mem::take(&mut shade.nonfinite))
         })
         .collect();
     let mut image = Image::new(w, h);
     let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
     let mut counts = RenderCounts::default();
     let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
-    for (&(tx, ty), (px, c, gs)) in tiles.iter().zip(&results) {
+    let mut nonfinite = Vec::new();
+    for (&(tx, ty), (px, c, gs, nf)) in tiles.iter().zip(&results) {
         counts.add(c);
+        nonfinite.extend_from_slice(nf);
         merge_graph_stats(&mut graph_stats, gs);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
@@ -258,13 +265,15 @@ pub fn render_cached(
             }
         }
     }
-    RenderOutput { image, footprint_aov: aov, counts, graph_stats, time: start.elapsed() }
+    nonfinite.sort_by_key(|n: &crate::shading::NonFiniteSample| (n.y, n.x, n.sample));
+    nonfinite.truncate(crate::shading::NONFINITE_KEPT);
+    RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, time: start.elapsed() }
 }
 
 fn merge_graph_stats(into: &mut Vec<graph::EvalStats>, from: &[graph::EvalStats]) {
     into.resize(from.len().max(into.len()), graph::EvalStats::default());
     for (a, b) in into.iter_mut().zip(from) {
-        crate::caching::merge_eval_stats(a, b);
+        a.merge(b);
     }
 }
 
@@ -333,12 +342,14 @@ pub fn render_pixel_with<O: PathObserver>(
     let mut sum = Spectrum::ZERO;
     for s in 0..settings.spp {
         let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
+        shade.begin_sample();
         let l = radiance(scene, settings, &cam, &mut rng, counts, shade, obs);
         counts.samples += 1;
         if l.is_finite() {
             sum += l;
         } else {
             counts.nonfinite_samples += 1;
+            shade.record_nonfinite(x, y, s);
         }
     }
     sum / settings.spp.max(1) as f32
@@ -589,6 +600,7 @@ pub fn radiance<O: PathObserver>(
     // Surfaces passed straight through since the last scattering vertex.
     let mut passes = 0u32;
     loop {
+        shade.depth = depth;
         counts.rays += 1;
         let hit = scene.accel.intersect(&scene.shapes, &ray);
         let Some(hit) = hit else {

@@ -562,7 +562,8 @@ impl Builder {
         self.pending_outputs.clear();
         self.pending_normal = None;
         let desc = self.bsdf(obj)?;
-        let material = self.finish_material(desc);
+        let mut material = self.finish_material(desc);
+        material.name = obj.id.clone().unwrap_or_else(|| format!("{} at {}", obj.plugin, obj.loc));
         let i = self.materials.len() as u32;
         self.materials.push(material);
         self.material_ids.insert(key, i);
@@ -683,7 +684,8 @@ impl Builder {
         }
         self.pending_outputs.clear();
         let normal_slot = self.pending_normal.take();
-        let mut m = Material { bsdf, graphs, slot_count, constant_outputs: Vec::new(), normal_slot };
+        let mut m =
+            Material { name: String::new(), bsdf, graphs, slot_count, constant_outputs: Vec::new(), normal_slot };
         m.compute_constant_outputs(&self.graphs);
         m
     }

@@ -277,7 +277,7 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
             }
         }
         for (x, y) in stats.iter_mut().zip(s) {
-            crate::caching::merge_eval_stats(x, y);
+            x.merge(y);
         }
     }
     if counts.samples == 0 {

@@ -48,6 +48,8 @@ pub struct MaterialGraph {
 /// A BSDF and the graph outputs its textures read.
 #[derive(Clone, Debug)]
 pub struct Material {
+    /// The name reports give it: the BSDF's `id`, or its plugin and place in the scene file.
+    pub name: String,
     /// The BSDF with its (possibly graph-valued) textures.
     pub bsdf: BsdfDesc,
     /// Graph outputs to evaluate before building the BSDF; empty for plain Mitsuba materials.
@@ -86,13 +88,79 @@ impl Material {
 
     /// A material without procedural textures.
     pub fn plain(bsdf: BsdfDesc) -> Self {
-        Material { bsdf, graphs: Vec::new(), slot_count: 0, constant_outputs: Vec::new(), normal_slot: None }
+        Material {
+            name: "default".into(),
+            bsdf,
+            graphs: Vec::new(),
+            slot_count: 0,
+            constant_outputs: Vec::new(),
+            normal_slot: None,
+        }
+    }
+}
+
+/// How many non-finite samples a render describes (the first ones, by pixel row, column and
+/// sample index, whatever the thread count).
+pub const NONFINITE_KEPT: usize = 8;
+
+/// A graph evaluation that went non-finite at a shading point.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GraphNonFinite {
+    /// The material being shaded.
+    pub material: String,
+    /// Index of the scene graph.
+    pub graph: u32,
+    /// The node that first gave a non-finite value, and the footprint.
+    pub at: graph::NonFinite,
+    /// The path vertex (0 = first hit).
+    pub bounce: u32,
+}
+
+/// A camera sample whose radiance was not finite (and was left out of its pixel).
+#[derive(Clone, Debug, PartialEq)]
+pub struct NonFiniteSample {
+    /// Pixel column.
+    pub x: u32,
+    /// Pixel row (0 = top).
+    pub y: u32,
+    /// Sample index within the pixel.
+    pub sample: u32,
+    /// The graph evaluation that went non-finite first on this sample's path, if one did (if
+    /// none did, the value came from a BSDF, an emitter or the integrator).
+    pub origin: Option<GraphNonFinite>,
+}
+
+impl NonFiniteSample {
+    /// One line for messages: the pixel, and the material, graph node, uv, footprint and bounce
+    /// where a graph value first went non-finite.
+    pub fn describe(&self, graphs: &[SceneGraph]) -> String {
+        let px = format!("pixel ({}, {}) sample {}", self.x, self.y, self.sample);
+        match &self.origin {
+            Some(o) => {
+                let g = &graphs[o.graph as usize];
+                format!(
+                    "{px}: material '{}', graph {}: {}, bounce {}",
+                    o.material,
+                    g.file_name(),
+                    o.at.describe(g.graph()),
+                    o.bounce
+                )
+            }
+            None => format!("{px}: no graph value was non-finite (from a BSDF, an emitter or the integrator)"),
+        }
     }
 }
 
 /// Per-thread graph evaluation memory and statistics (allocated once per thread or tile), and
 /// the thread's access to the node cache when one is used.
 pub struct ShadeScratch<'a> {
+    /// The bounce (0 = first hit) of the vertex being shaded, set by the integrator: reports of
+    /// non-finite values name it.
+    pub(crate) depth: u32,
+    /// Where the current camera sample's graph evaluations first went non-finite.
+    sample_origin: Option<GraphNonFinite>,
+    /// The first non-finite samples of this scratch's pixels (at most [`NONFINITE_KEPT`]).
+    pub(crate) nonfinite: Vec<NonFiniteSample>,
     scratches: Vec<EvalScratch>,
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
@@ -120,6 +188,9 @@ impl<'a> ShadeScratch<'a> {
         let per_graph = materials.iter().flat_map(|m| m.graphs.iter().map(|g| g.slots.len())).max().unwrap_or(0);
         let zero = Filtered::constant(graph::Value::float(0.0));
         ShadeScratch {
+            depth: 0,
+            sample_origin: None,
+            nonfinite: Vec::new(),
             scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
@@ -143,11 +214,35 @@ impl<'a> ShadeScratch<'a> {
                     None => g.eval(&mg.plan, fp, scratch, &NoOverride, &mut self.tmp[..n]),
                 }
             }
+            if let Some(at) = scratch.take_nonfinite() {
+                if self.sample_origin.is_none() {
+                    self.sample_origin = Some(GraphNonFinite {
+                        material: material.name.clone(),
+                        graph: mg.graph,
+                        at,
+                        bounce: self.depth,
+                    });
+                }
+            }
             for (k, &slot) in mg.slots.iter().enumerate() {
                 self.outputs[slot as usize] = self.tmp[k];
             }
         }
         &self.outputs[..material.slot_count as usize]
+    }
+
+    /// Starts a camera sample: forgets the previous sample's non-finite origin.
+    #[inline]
+    pub(crate) fn begin_sample(&mut self) {
+        self.sample_origin = None;
+    }
+
+    /// Records that sample `sample` of pixel (`x`, `y`) had a non-finite radiance (kept if it is
+    /// among this scratch's first [`NONFINITE_KEPT`]).
+    pub(crate) fn record_nonfinite(&mut self, x: u32, y: u32, sample: u32) {
+        if self.nonfinite.len() < NONFINITE_KEPT {
+            self.nonfinite.push(NonFiniteSample { x, y, sample, origin: self.sample_origin.clone() });
+        }
     }
 
     /// The per-graph evaluation scratches (the profiler turns on their binned timings).
@@ -163,7 +258,7 @@ impl<'a> ShadeScratch<'a> {
         }
         if let Some(access) = &self.cache {
             for (fill, out) in access.fill_stats.borrow().iter().zip(stats.iter_mut()) {
-                crate::caching::merge_eval_stats(out, fill);
+                out.merge(fill);
             }
         }
     }

@@ -112,6 +112,10 @@ struct RenderArgs {
     /// Texels per uv unit at level 0 for footprint LODs in AOVs.
     #[arg(long, default_value_t = 1024.0)]
     aov_density: f64,
+    /// Make a sample with NaN or infinite radiance, or a procedural texture value that is not
+    /// finite, an error naming where it came from; nothing is written.
+    #[arg(long)]
+    strict: bool,
 }
 
 fn parse_footprint(s: &str) -> Result<FootprintMode, String> {
@@ -224,6 +228,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
     let cache_setup_s = t_cache.elapsed().as_secs_f64();
     let out = pool.install(|| render_cached(&scene, settings, node_cache.as_ref(), &|n| bar.inc(n)));
     bar.finish_and_clear();
+    let nonfinite = NonFiniteReport::of(&scene, &out);
+    if args.strict && !nonfinite.is_clean() {
+        bail!("--strict: {}; nothing was written", nonfinite.message());
+    }
 
     let t_write = Instant::now();
     for o in &outputs {
@@ -290,9 +298,10 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 }
             );
         }
-        if c.nonfinite_samples > 0 {
-            eprintln!("warning: {} samples had NaN or infinite radiance and were discarded", c.nonfinite_samples);
-        }
+    }
+    // Never quiet: a wrong value is reported even with --quiet.
+    if !nonfinite.is_clean() {
+        eprintln!("warning: {}", nonfinite.message());
     }
     if let Some(path) = &args.stats_json {
         let stats = json!({
@@ -313,6 +322,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 "shadow_rays": c.shadow_rays,
                 "nonfinite_samples": c.nonfinite_samples,
             },
+            "nonfinite": nonfinite.json(&scene),
             "throughput": {
                 "samples_per_s": c.samples as f64 / render_s,
                 "rays_per_s": total_rays as f64 / render_s,
@@ -405,6 +415,7 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
                         "evaluations": st.evaluations.get(id.0 as usize).copied().unwrap_or(0),
                         "lookups": st.lookups.get(id.0 as usize).copied().unwrap_or(0),
                         "estimated_s": st.estimated_seconds(id.0 as usize),
+                        "nonfinite": st.nonfinite.get(id.0 as usize).copied().unwrap_or(0),
                     })
                 })
                 .collect();
@@ -416,6 +427,104 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
         })
         .collect();
     serde_json::Value::Array(graphs)
+}
+
+/// What a render says about values that were not finite: samples left out of their pixels
+/// (with the first ones' origins) and graph nodes that gave non-finite values.
+struct NonFiniteReport {
+    samples: u64,
+    first: Vec<render::shading::NonFiniteSample>,
+    /// (graph index, node, evaluations in which that node was the first to go non-finite).
+    nodes: Vec<(usize, graph::NodeId, u64)>,
+    first_lines: Vec<String>,
+    node_lines: Vec<String>,
+}
+
+impl NonFiniteReport {
+    fn of(scene: &Scene, out: &render::integrator::RenderOutput) -> NonFiniteReport {
+        let mut nodes = Vec::new();
+        for (gi, st) in out.graph_stats.iter().enumerate() {
+            for (ni, &n) in st.nonfinite.iter().enumerate() {
+                if n > 0 {
+                    nodes.push((gi, graph::NodeId(ni as u32), n));
+                }
+            }
+        }
+        let first_lines = out.nonfinite.iter().map(|s| s.describe(&scene.graphs)).collect();
+        let node_lines = nodes
+            .iter()
+            .map(|&(gi, id, n)| {
+                let sg = &scene.graphs[gi];
+                let g = sg.graph();
+                format!("graph {}: node `{}` ({}) {n} times", sg.file_name(), g.node_name(id), g.node_category(id))
+            })
+            .collect();
+        NonFiniteReport {
+            samples: out.counts.nonfinite_samples,
+            first: out.nonfinite.clone(),
+            nodes,
+            first_lines,
+            node_lines,
+        }
+    }
+
+    fn is_clean(&self) -> bool {
+        self.samples == 0 && self.nodes.is_empty()
+    }
+
+    /// One paragraph: the count, the first samples' origins, and the nodes.
+    fn message(&self) -> String {
+        let mut m = String::new();
+        if self.samples > 0 {
+            m += &format!(
+                "{} samples had NaN or infinite radiance and were left out of their pixels; the first: {}",
+                self.samples,
+                self.first_lines.join("; ")
+            );
+        }
+        if !self.nodes.is_empty() {
+            if !m.is_empty() {
+                m += ". ";
+            }
+            m += &format!(
+                "procedural texture values that were not finite came first from: {}",
+                self.node_lines.join("; ")
+            );
+        }
+        m
+    }
+
+    fn json(&self, scene: &Scene) -> serde_json::Value {
+        let first: Vec<serde_json::Value> = self
+            .first
+            .iter()
+            .map(|s| {
+                let origin = s.origin.as_ref().map(|o| {
+                    let sg = &scene.graphs[o.graph as usize];
+                    let g = sg.graph();
+                    json!({
+                        "material": o.material,
+                        "graph": sg.file_name(),
+                        "node": g.node_name(o.at.node),
+                        "category": g.node_category(o.at.node),
+                        "uv": [o.at.uv.x, o.at.uv.y],
+                        "sigma": o.at.sigma,
+                        "bounce": o.bounce,
+                    })
+                });
+                json!({ "x": s.x, "y": s.y, "sample": s.sample, "origin": origin })
+            })
+            .collect();
+        let nodes: Vec<serde_json::Value> = self
+            .nodes
+            .iter()
+            .map(|&(gi, id, n)| {
+                let sg = &scene.graphs[gi];
+                json!({ "graph": sg.file_name(), "node": sg.graph().node_name(id), "category": sg.graph().node_category(id), "count": n })
+            })
+            .collect();
+        json!({ "samples": self.samples, "first": first, "nodes": nodes })
+    }
 }
 
 /// Loads a scene file, or the embedded demo scene when none is given.

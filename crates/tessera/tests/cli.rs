@@ -212,3 +212,144 @@ fn strategies_from_the_command_line() {
         &["smaller than one tile"],
     );
 }
+
+/// A floor textured by an image whose texels are NaN on one side: a known source of non-finite
+/// texture values (EXR files do hold NaNs). Writes the scene, its document and the image to `dir`.
+fn nan_texture_scene(dir: &Path) -> PathBuf {
+    exr::prelude::write_rgb_file(
+        dir.join("nan.exr"),
+        4,
+        4,
+        |x, _| if x < 2 { (f32::NAN, 0.5, 0.5) } else { (0.5, 0.5, 0.5) },
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("nan.mtlx"),
+        r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="NG">
+    <image name="tex" type="color3"><input name="file" type="filename" value="nan.exr"/></image>
+    <output name="out" type="color3" nodename="tex"/>
+  </nodegraph>
+</materialx>"#,
+    )
+    .unwrap();
+    let scene = dir.join("nan.xml");
+    std::fs::write(
+        &scene,
+        r#"<scene version="3.0.0">
+    <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+    <sensor type="perspective"><float name="fov" value="50"/>
+        <transform name="to_world"><lookat origin="0, 2, 0.01" target="0, 0, 0" up="0, 0, -1"/></transform>
+        <film type="hdrfilm"><integer name="width" value="16"/><integer name="height" value="16"/></film>
+        <sampler type="independent"><integer name="sample_count" value="2"/></sampler>
+    </sensor>
+    <shape type="rectangle">
+        <bsdf type="diffuse" id="nan_floor">
+            <texture type="mtlx" name="reflectance"><string name="filename" value="nan.mtlx"/><string name="output" value="NG/out"/></texture>
+        </bsdf>
+    </shape>
+    <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+</scene>"#,
+    )
+    .unwrap();
+    scene
+}
+
+#[test]
+fn non_finite_texture_values_are_reported_and_strict_refuses_them() {
+    let dir = temp_dir("nonfinite");
+    let scene = nan_texture_scene(&dir);
+    let out = tessera()
+        .current_dir(&dir)
+        .args(["render", "--quiet", "--stats-json", "stats.json", "--out", "nan.exr.out.exr"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // Even with --quiet: the graph, the node and how often. (Texture reads map a NaN to 0, so
+    // the samples themselves stay finite: without this report the floor would only look dark.)
+    for needle in ["procedural texture values that were not finite", "nan.mtlx", "node `NG/tex` (image)", "times"] {
+        assert!(err.contains(needle), "no `{needle}` in: {err}");
+    }
+    let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("stats.json")).unwrap()).unwrap();
+    assert_eq!(stats["nonfinite"]["samples"], stats["counts"]["nonfinite_samples"]);
+    let first_node = &stats["nonfinite"]["nodes"][0];
+    assert_eq!(first_node["node"], "NG/tex");
+    assert_eq!(first_node["graph"], "nan.mtlx");
+    let count = first_node["count"].as_u64().unwrap();
+    assert!(count > 0);
+    let node = stats["graphs"][0]["nodes"].as_array().unwrap().iter().find(|v| v["name"] == "NG/tex").unwrap().clone();
+    assert_eq!(node["nonfinite"].as_u64(), Some(count), "{node}");
+    // The image holds no NaN.
+    let img = exr::prelude::read_first_rgba_layer_from_file(
+        dir.join("nan.exr.out.exr"),
+        |r, _| vec![0.0f32; r.width() * r.height() * 4],
+        |v, p, (r, g, b, _): (f32, f32, f32, f32)| {
+            let i = (p.y() * 16 + p.x()) * 4;
+            v[i..i + 3].copy_from_slice(&[r, g, b]);
+        },
+    )
+    .unwrap();
+    assert!(img.layer_data.channel_data.pixels.iter().all(|x| x.is_finite()));
+
+    // --strict: an error naming the node, and nothing written.
+    let out = tessera()
+        .current_dir(&dir)
+        .args(["render", "--quiet", "--strict", "--out", "strict.exr", "--stats-json", "strict.json"])
+        .arg(&scene)
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("--strict") && err.contains("node `NG/tex` (image)") && err.contains("nothing was written"),
+        "{err}"
+    );
+    assert!(!dir.join("strict.exr").exists() && !dir.join("strict.json").exists());
+
+    // tessera bake never writes a NaN texel: an error naming the node and the texel.
+    let out = tessera()
+        .current_dir(&dir)
+        .args(["bake", "nan.mtlx", "--element", "NG/out", "--out", "bake.exr", "--res", "8"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("not finite") && err.contains("texel (0, 0)") && err.contains("node `NG/tex` (image)"),
+        "{err}"
+    );
+    assert!(!dir.join("bake.exr").exists());
+}
+
+#[test]
+fn demo_scenes_have_no_non_finite_values() {
+    let dir = temp_dir("demo-finite");
+    let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    for name in ["marble", "brick_moss", "rusted_metal", "wood_floor"] {
+        let out = tessera()
+            .current_dir(&dir)
+            .args([
+                "render",
+                "--quiet",
+                "--strict",
+                "-D",
+                "res=32",
+                "-D",
+                "spp=2",
+                "--stats-json",
+                "s.json",
+                "--out",
+                "x.exr",
+            ])
+            .arg(scenes.join(format!("{name}.xml")))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+        let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("s.json")).unwrap()).unwrap();
+        assert_eq!(stats["nonfinite"]["samples"], 0, "{name}");
+        assert_eq!(stats["nonfinite"]["nodes"].as_array().map(|a| a.len()), Some(0), "{name}");
+    }
+}

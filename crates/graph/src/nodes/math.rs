@@ -14,7 +14,7 @@
 //! | `sign` | `in` (0) | `2Φ(m/σ) − 1` |
 //! | `sin`, `cos` | `in` (0) | closed form (`e^{−σ²/2}` damping) |
 //! | `exp` | `in` (0) | closed form (log-normal) |
-//! | `sqrt`, `ln` (`in` = 1), `power` (`in2` = 1), `tan`, `asin`, `acos` | | 5-point Gauss–Hermite (uniform exponent), cubature otherwise |
+//! | `sqrt`, `ln` (`in` = 1), `power` (`in2` = 1), `tan`, `asin`, `acos` | | 5-point Gauss–Hermite (uniform exponent), cubature otherwise, on the total point functions: `sqrt` of a negative is 0, `ln` of x ≤ 0 is ln 1e-30, `asin`/`acos` clamp to [−1, 1], `power` is OSL's `safe_pow` (x⁰ = 1, 0ʸ = 0, a negative base with a fractional exponent 0) |
 //! | `atan2` | `iny` (0), `inx` (1) | cubature |
 //! | `dotproduct`, `magnitude`, `distance`, `normalize` | vectors | exact for a uniform operand of `dotproduct`; cubature otherwise |
 //! | `and`, `or`, `xor`, `not` | booleans `in1`, `in2` (false) / `in` (false) | a boolean's mean is the probability that it is true over the footprint; the operands are taken as independent: `p1 p2`, `p1 + p2 − p1 p2`, `p1 + p2 − 2 p1 p2`, `1 − p` (exact at points) |
@@ -22,7 +22,8 @@
 //! | `switch` | `in1` … `in10` (0), `which` (0; float or integer) | at a point, `in1` for `which < 1`, `in2` for `which < 2`, …, `in10` otherwise (MaterialX's code generators); over a footprint, the mixture `Σ P_k in_k` with `P_k` the Gaussian mass of `which` in the k-th interval, and the mixture's variance |
 //!
 //! Cubature and Hermite rules treat channels as Gaussian and independent; at Σ = 0 every rule
-//! reduces to the plain function of the inputs.
+//! reduces to the plain function of the inputs. Division by zero (`divide`, `modulo`, `remap`
+//! and `range` with equal bounds) is 0, as in OSL; values beyond the f32 range saturate.
 
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{self, poly, poly_shift_scale, Piece};
