@@ -440,3 +440,39 @@ fn fuzzer_finds_a_removed_domain_guard() {
     // With the guard back, the same graph is total.
     assert!(!check(i, &b, false).kinds.iter().any(|k| k.starts_with("(a)")));
 }
+
+/// Regression: a wood-ring graph written the way users write one (`sin` of a distance plus a
+/// warped `fractal2d`, `remap` to [0, 1], then `power` 2.5, mixed into a colour) went NaN when
+/// filtered: the remapped value's mean lies in [0, 1] but its spread reaches below 0, and
+/// `power`'s quadrature evaluated negative bases. Every bake is finite now, and the filtered bakes
+/// keep the brightness of the point bake (a NaN or a zeroed texel would darken them).
+#[test]
+fn wood_rings_through_power_stay_finite_and_bright() {
+    let text = r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="NG_wood">
+    <texcoord name="uv" type="vector2"/>
+    <multiply name="scaled" type="vector2"><input name="in1" type="vector2" nodename="uv"/><input name="in2" type="float" value="8"/></multiply>
+    <fractal2d name="warp" type="float"><input name="texcoord" type="vector2" nodename="scaled"/><input name="octaves" type="integer" value="5"/><input name="amplitude" type="float" value="0.6"/></fractal2d>
+    <distance name="radius" type="float"><input name="in1" type="vector2" nodename="scaled"/><input name="in2" type="vector2" value="4, -2"/></distance>
+    <add name="phase" type="float"><input name="in1" type="float" nodename="radius"/><input name="in2" type="float" nodename="warp"/></add>
+    <multiply name="freq" type="float"><input name="in1" type="float" nodename="phase"/><input name="in2" type="float" value="6.2831853"/></multiply>
+    <sin name="rings" type="float"><input name="in" type="float" nodename="freq"/></sin>
+    <remap name="unit" type="float"><input name="in" type="float" nodename="rings"/><input name="inlow" type="float" value="-1"/><input name="inhigh" type="float" value="1"/></remap>
+    <power name="sharp" type="float"><input name="in1" type="float" nodename="unit"/><input name="in2" type="float" value="2.5"/></power>
+    <mix name="wood" type="color3"><input name="fg" type="color3" value="0.45, 0.27, 0.12"/><input name="bg" type="color3" value="0.75, 0.55, 0.33"/><input name="mix" type="float" nodename="sharp"/></mix>
+    <output name="out" type="color3" nodename="wood"/>
+  </nodegraph>
+</materialx>"#;
+    let doc = graph::Document::parse(text, "wood_rings.mtlx".as_ref(), &graph::LoadOptions::default()).unwrap();
+    let mean = |img: &graph::BakedImage| img.data.iter().map(|&x| x as f64).sum::<f64>() / img.data.len() as f64;
+    let point = graph::bake::bake_element(&doc, "NG_wood/out", &graph::BakeSettings::new(512, 512)).unwrap();
+    let reference = mean(&point);
+    for res in [256, 64, 16] {
+        let settings = graph::BakeSettings { filter: graph::BakeFilter::Texel, ..graph::BakeSettings::new(res, res) };
+        let img = graph::bake::bake_element(&doc, "NG_wood/out", &settings).unwrap_or_else(|e| panic!("{res}: {e}"));
+        assert!(img.data.iter().all(|x| x.is_finite()));
+        let m = mean(&img);
+        assert!((m - reference).abs() < 0.02 * reference, "{res}²: mean {m} against the point bake's {reference}");
+    }
+}

@@ -688,6 +688,16 @@ fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     out
 }
 
+/// The most octaves a fractal sums: far more than any document asks for (a lacunarity of 2
+/// leaves the f32 range after 128), and a bound on the work a node can cost.
+pub const MAX_OCTAVES: u32 = 64;
+
+/// A fractal's `octaves` input as a count: rounded, at least 0, at most [`MAX_OCTAVES`].
+#[inline]
+pub(crate) fn octave_count(x: f32) -> i32 {
+    x.round().clamp(0.0, MAX_OCTAVES as f32) as i32
+}
+
 /// Whether a fractal octave of amplitude `a` and frequency `f` is summed. Octaves stop once the
 /// amplitude leaves [1e-30, 1e30] (below, nothing an f32 sum can hold; above, beyond where a
 /// value saturates) or the frequency leaves the f32 range (where every coordinate is a lattice
@@ -770,7 +780,7 @@ fn fractal_sum(
 
 fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let amp = &ins[0];
-    let octaves = ins[1].ch[0].mean.round().max(0.0) as i32;
+    let octaves = octave_count(ins[1].ch[0].mean);
     let lac = ins[2].ch[0].mean as f64;
     let dim = ins[3].ch[0].mean as f64;
     let (p0, s0, j) = coordinate(&ins[4]);
@@ -786,7 +796,7 @@ fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
 /// Unfiltered fractal noise (for tests and the point path).
 pub fn fractal_point(p: Vec2, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
     let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
-    for _ in 0..octaves {
+    for _ in 0..octaves.min(MAX_OCTAVES as i32) {
         if !(octave_counts(a, 1.0) && q.is_finite()) {
             break;
         }
@@ -1022,7 +1032,7 @@ fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
     let (t, freq, off, jitter) = (&ins[0], &ins[1], &ins[2], ins[3].ch[0].mean);
     let (outmin, outmax) = (ins[4].ch[0], ins[5].ch[0]);
     let clamp = ins[6].ch[0].mean > 0.5;
-    let octaves = ins[7].ch[0].mean.round().max(0.0) as i32;
+    let octaves = octave_count(ins[7].ch[0].mean);
     let (lac, dim) = (ins[8].ch[0].mean as f64, ins[9].ch[0].mean as f64);
     let kind = ins[10].ch[0].mean.round() as i32;
     // p = texcoord · freq + offset (exact: affine in the inputs).

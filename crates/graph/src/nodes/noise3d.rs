@@ -171,7 +171,7 @@ pub fn perlin3(p: Vec3) -> f32 {
 /// Unfiltered float 3D fractal noise (MaterialX `mx_fractal_noise_float(vec3)`).
 pub fn fractal3_point(p: Vec3, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
     let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
-    for _ in 0..octaves {
+    for _ in 0..octaves.min(super::noise::MAX_OCTAVES as i32) {
         if !(super::noise::octave_counts(a, 1.0) && q.is_finite()) {
             break;
         }
@@ -438,7 +438,7 @@ fn fractal_sum(
 
 fn fractal3d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let amp = &ins[0];
-    let octaves = ins[1].ch[0].mean.round().max(0.0) as i32;
+    let octaves = super::noise::octave_count(ins[1].ch[0].mean);
     let (lac, dim) = (ins[2].ch[0].mean as f64, ins[3].ch[0].mean as f64);
     let (p, s, j) = coordinate(&ins[4]);
     let (sels, offs, n) = channel_layout(ty, true);
@@ -699,7 +699,7 @@ fn unified3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx
     let (pos, freq, off, jitter) = (&ins[0], &ins[1], &ins[2], ins[3].ch[0].mean);
     let (outmin, outmax) = (ins[4].ch[0], ins[5].ch[0]);
     let clamp = ins[6].ch[0].mean > 0.5;
-    let octaves = ins[7].ch[0].mean.round().max(0.0) as i32;
+    let octaves = super::noise::octave_count(ins[7].ch[0].mean);
     let (lac, dim) = (ins[8].ch[0].mean as f64, ins[9].ch[0].mean as f64);
     let kind = ins[10].ch[0].mean.round() as i32;
     // p = position · freq + offset (exact: affine in the inputs).

@@ -131,7 +131,9 @@ fn circle_point(t: Vec2, c: Vec2, r: f32) -> f32 {
 fn line_point(t: Vec2, c: Vec2, r: f32, p1: Vec2, p2: Vec2) -> f32 {
     let pa = t - c - p1;
     let ba = p2 - p1;
-    let h = (pa.dot(ba) / ba.dot(ba)).clamp(0.0, 1.0);
+    // Two equal end points make the segment a point (h = 0), not a NaN (division by zero is 0).
+    let bb = ba.dot(ba);
+    let h = if bb == 0.0 { 0.0 } else { (pa.dot(ba) / bb).clamp(0.0, 1.0) };
     if pa.distance(ba * h) > r {
         0.0
     } else {
@@ -503,7 +505,9 @@ fn periodic_mass(a: f64, b: f64, m: f64, s: f64) -> (f64, f64) {
 
 fn grid(ins: &[Filtered]) -> Moments {
     let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
-    let th = ins[3].ch[0].mean as f64;
+    // Beyond [0, 1] the point function is the same as at the nearer end (no lines below 0, all
+    // lines above 1): clamped so that the two row classes of the staggered grid cannot overlap.
+    let th = (ins[3].ch[0].mean as f64).clamp(0.0, 1.0);
     let staggered = ins[4].ch[0].mean > 0.5;
     let (m, s, j) = coord(&ins[0], tile, off);
     // Off a line along an axis: fract ∈ [th/2, 1 − th/2].
@@ -569,7 +573,7 @@ impl Tiled {
                 out.push(Piece { prims: [Some(d1), Some(d2), Some(rect)], sign: -1.0 });
             }
             Tiled::Shapes { size, staggered, hex } => {
-                let shape = |c: DVec2, r: f64| if hex { Prim::Hex { c, r } } else { Prim::Disk { c, r } };
+                let shape = |c: DVec2, r: f64| if hex { Prim::Hex { c, r } } else { Prim::Disk { c, r: r.abs() } };
                 if !staggered {
                     let rect = Prim::Rect { lo: DVec2::new(fi, fj), hi: DVec2::new(fi + 1.0, fj + 1.0) };
                     out.push(Piece::clipped(shape(DVec2::new(fi + 0.5, fj + 0.5), size / 2.0), rect));
@@ -603,6 +607,14 @@ impl Tiled {
 }
 
 fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
+    // As at points: crosshatch lines and hexagons of no positive size are empty (circles see
+    // only the size's square, so a negative one is its magnitude: see `pieces`).
+    match pat {
+        Tiled::Cross { th, .. } if th <= 0.0 => return Moments::constant(0.0),
+        Tiled::Shapes { size, hex: true, .. } if size <= 0.0 => return Moments::constant(0.0),
+        Tiled::Shapes { size, hex: false, .. } if size == 0.0 => return Moments::constant(0.0),
+        _ => {}
+    }
     let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
     let (m, s, j) = coord(&ins[0], tile, off);
     if s.x.min(s.y / pat.row_height()) > TILE_SIGMA_GLOBAL {
