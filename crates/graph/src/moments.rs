@@ -11,13 +11,27 @@ use crate::gaussian;
 use crate::value::{Footprint, Moments};
 use glam::Vec2;
 
+/// Whether every part of `m` is finite (one sum; an overflowing sum of finite parts only sends a
+/// caller to its exact path).
+#[inline]
+fn all_finite(m: &Moments) -> bool {
+    (m.mean + m.grad.x + m.grad.y + m.var).is_finite()
+}
+
+// The algebra below computes in f32 first (the common case, and the values MaterialX's f32
+// shaders give) and redoes the computation in f64, saturating to the f32 range, only when the
+// f32 result is not finite: huge operands then never make a 0 · ∞ or ∞ − ∞.
+
 /// Estimated covariance of two channels over the footprint.
 #[inline]
 pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
-    // In f64: huge gradients must not overflow into ∞ − ∞.
+    let c = fp.quad(a.grad, b.grad);
+    let bound = (a.var.max(0.0) * b.var.max(0.0)).sqrt();
+    if c.is_finite() && bound.is_finite() {
+        return c.max(-bound).min(bound);
+    }
     let (g, h) = (a.grad.as_dvec2(), b.grad.as_dvec2());
-    let s = fp.cov.as_dmat2();
-    let c = g.dot(s * h);
+    let c = g.dot(fp.cov.as_dmat2() * h);
     let bound = (a.var.max(0.0) as f64 * b.var.max(0.0) as f64).sqrt();
     // max/min rather than clamp: no panic should a bound be NaN.
     sat(c.max(-bound).min(bound))
@@ -26,6 +40,10 @@ pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
 /// `k a + c`.
 #[inline]
 pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
+    let r = Moments { mean: k * a.mean + c, grad: a.grad * k, var: k * k * a.var };
+    if all_finite(&r) {
+        return r;
+    }
     let (k, m) = (sat64(k as f64), a.mean as f64);
     Moments { mean: sat(k * m + c as f64), grad: scale_grad(a.grad, k), var: sat(k * k * a.var as f64) }
 }
@@ -33,8 +51,16 @@ pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
 /// `a + k b`.
 #[inline]
 pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
-    let c = cov(&a, &b, fp) as f64;
-    let k = k as f64;
+    let c = cov(&a, &b, fp);
+    let r = Moments {
+        mean: a.mean + k * b.mean,
+        grad: a.grad + b.grad * k,
+        var: (a.var + k * k * b.var + 2.0 * k * c).max(0.0),
+    };
+    if all_finite(&r) {
+        return r;
+    }
+    let (c, k) = (c as f64, k as f64);
     let g = scale_grad(b.grad, k);
     Moments {
         mean: sat(a.mean as f64 + k * b.mean as f64),
@@ -43,7 +69,7 @@ pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
     }
 }
 
-/// `a · b` for jointly Gaussian operands (in f64, saturated to the f32 range).
+/// `a · b` for jointly Gaussian operands.
 #[inline]
 pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
     if b.var == 0.0 && b.grad == Vec2::ZERO {
@@ -52,7 +78,17 @@ pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
     if a.var == 0.0 && a.grad == Vec2::ZERO {
         return affine(b, a.mean, 0.0);
     }
-    let c = cov(&a, &b, fp) as f64;
+    let c = cov(&a, &b, fp);
+    let r = Moments {
+        mean: a.mean * b.mean + c,
+        grad: a.grad * b.mean + b.grad * a.mean,
+        var: (a.mean * a.mean * b.var + b.mean * b.mean * a.var + 2.0 * a.mean * b.mean * c + a.var * b.var + c * c)
+            .max(0.0),
+    };
+    if all_finite(&r) {
+        return r;
+    }
+    let c = c as f64;
     let (am, bm, av, bv) = (a.mean as f64, b.mean as f64, a.var as f64, b.var as f64);
     let (ga, gb) = (scale_grad(a.grad, bm), scale_grad(b.grad, am));
     Moments {
@@ -112,6 +148,10 @@ pub fn recip(x: f32) -> f32 {
 /// `g + h`, saturated.
 #[inline]
 pub fn add_grad(g: Vec2, h: Vec2) -> Vec2 {
+    let r = g + h;
+    if r.is_finite() {
+        return r;
+    }
     Vec2::new(sat(g.x as f64 + h.x as f64), sat(g.y as f64 + h.y as f64))
 }
 
@@ -119,6 +159,10 @@ pub fn add_grad(g: Vec2, h: Vec2) -> Vec2 {
 /// whatever the slope (never `0 · ∞`).
 #[inline]
 pub fn scale_grad(g: Vec2, k: f64) -> Vec2 {
+    let r = g * k as f32;
+    if r.is_finite() {
+        return r;
+    }
     let one = |x: f32| if x == 0.0 { 0.0 } else { sat(x as f64 * k) };
     Vec2::new(one(g.x), one(g.y))
 }

@@ -389,15 +389,18 @@ fn sin_of(x: Moments, cosine: bool) -> Moments {
 fn exp_of(x: Moments) -> Moments {
     let (m, v) = (x.mean as f64, x.var as f64);
     let e = (m + 0.5 * v).exp();
-    // (e^v − 1) e², saturated like every node's output (and 0 without spread, even where e²
-    // overflows).
-    // In logs, e^{2m + v} (e^v − 1), so that a vanishing e and a huge e^v make no 0 · ∞.
-    let var = if v > 0.0 {
+    // (e^v − 1) e², saturated like every node's output. Where that is 0 · ∞: 0 without spread
+    // (even where e² overflows), else in logs, e^{2m + v} (e^v − 1).
+    let direct = (v.exp() - 1.0) * e * e;
+    let var = if direct.is_finite() {
+        direct
+    } else if v > 0.0 {
         let ln_expm1 = if v > 30.0 { v } else { v.exp_m1().ln() };
-        sat((2.0 * m + v + ln_expm1).exp())
+        (2.0 * m + v + ln_expm1).exp()
     } else {
         0.0
     };
+    let var = sat(var);
     Moments { mean: sat(e), grad: scale_grad(x.grad, e), var }
 }
 

@@ -275,7 +275,9 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
             c.grad = glam::Vec2::ZERO;
         }
     }
-    saturate(&mut out);
+    if !crate::eval::is_finite(&out) {
+        saturate(&mut out);
+    }
     out
 }
 
