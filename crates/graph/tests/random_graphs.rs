@@ -476,3 +476,156 @@ fn wood_rings_through_power_stay_finite_and_bright() {
         assert!((m - reference).abs() < 0.02 * reference, "{res}²: mean {m} against the point bake's {reference}");
     }
 }
+
+/// Graphs the fuzzer found going non-finite, hanging or panicking, each reduced to the node and
+/// inputs that did it. Every one must now give finite values at a point and over footprints,
+/// quickly.
+#[test]
+fn regressions_found_by_the_fuzzer() {
+    use graph::{GraphBuilder, Source, Value, ValueType as T};
+    let c = |ty: T, v: &[f32]| Source::Constant(Value::new(ty, v));
+    let uv = || Source::Texcoord;
+    type Case = (&'static str, &'static str, T, Vec<(&'static str, Source)>, Vec2);
+    let cases: Vec<Case> = vec![
+        // 0 · ∞ in exp's variance and gradient.
+        ("exp overflow", "exp", T::Vector2, vec![("in", c(T::Vector2, &[1e6, -1e6]))], Vec2::new(0.3, 0.4)),
+        ("exp of a huge uv", "exp", T::Vector2, vec![("in", uv())], Vec2::new(1.5, 2.8)),
+        // power's quadrature below 0 (the wood rings) and 16^40.
+        (
+            "power of a spread across 0",
+            "power",
+            T::Vector2,
+            vec![("in1", uv()), ("in2", c(T::Float, &[2.5]))],
+            Vec2::new(0.05, 0.5),
+        ),
+        (
+            "power overflow",
+            "power",
+            T::Float,
+            vec![("in1", c(T::Float, &[16.0])), ("in2", c(T::Float, &[40.0]))],
+            Vec2::ZERO,
+        ),
+        // 1 / 1e-42 overflowing f32 in place2d's scale.
+        (
+            "place2d tiny scale",
+            "place2d",
+            T::Vector2,
+            vec![
+                ("scale", c(T::Vector2, &[1.0, 1e-42])),
+                ("rotate", c(T::Float, &[-1.0])),
+                ("operationorder", c(T::Integer, &[5.0])),
+            ],
+            Vec2::new(1.36, -1.89),
+        ),
+        // An infinite rotation angle from a huge jitter.
+        (
+            "unifiednoise2d huge jitter",
+            "unifiednoise2d",
+            T::Float,
+            vec![("jitter", c(T::Float, &[3.4e38]))],
+            Vec2::new(-1.9, -1.2),
+        ),
+        // remap's slope overflowing f32, then 0 · ∞ in its offset.
+        (
+            "remap slope overflow",
+            "remap",
+            T::Vector2,
+            vec![("in", uv()), ("inhigh", c(T::Float, &[-2.1e-33])), ("outhigh", c(T::Float, &[3.4e38]))],
+            Vec2::new(-0.75, 1.9),
+        ),
+        // A million octaves of lacunarity 1 (minutes) and diminish 1.9 (amplitude overflow).
+        (
+            "fractal2d many octaves",
+            "fractal2d",
+            T::Float,
+            vec![
+                ("octaves", c(T::Integer, &[1e6])),
+                ("lacunarity", c(T::Float, &[1.0])),
+                ("diminish", c(T::Float, &[1.0])),
+            ],
+            Vec2::new(0.2, 0.3),
+        ),
+        (
+            "fractal2d growing amplitude",
+            "fractal2d",
+            T::Float,
+            vec![
+                ("octaves", c(T::Integer, &[40.0])),
+                ("lacunarity", c(T::Float, &[-5.5])),
+                ("diminish", c(T::Float, &[-1.92])),
+            ],
+            Vec2::new(-1.5, 2.0),
+        ),
+        // Perlin noise far beyond i32 lattice indices.
+        ("noise2d far out", "noise2d", T::Float, vec![("texcoord", c(T::Vector2, &[3e9, -7e12]))], Vec2::ZERO),
+        // The checkerboard's cell loops far from the origin (k + 1 == k: they never ended).
+        (
+            "checkerboard far out",
+            "checkerboard",
+            T::Color3,
+            vec![("uvtiling", c(T::Vector2, &[1e17, 1e17]))],
+            Vec2::new(0.7, 0.2),
+        ),
+        (
+            "checkerboard huge tiling",
+            "checkerboard",
+            T::Color3,
+            vec![("uvtiling", c(T::Vector2, &[1e30, 1e30]))],
+            Vec2::new(768.0, 426.0),
+        ),
+        // A negative radius (clamp with min > max panicked) and a line of one point (0/0).
+        ("hexagon negative radius", "hexagon", T::Float, vec![("radius", c(T::Float, &[-2.0]))], Vec2::new(0.4, 0.6)),
+        (
+            "line of one point",
+            "line",
+            T::Float,
+            vec![
+                ("point1", c(T::Vector2, &[0.5, 0.5])),
+                ("point2", c(T::Vector2, &[0.5, 0.5])),
+                ("radius", c(T::Float, &[0.2])),
+            ],
+            Vec2::new(0.55, 0.5),
+        ),
+    ];
+    for (what, cat, ty, inputs, centre) in cases {
+        let mut b = GraphBuilder::new();
+        let id = b.add_node("n", cat, ty, &inputs, Vec::new()).unwrap_or_else(|e| panic!("{what}: {e}"));
+        let out = b.add_output("out", ty, Source::Node { node: id, channel: None }).unwrap();
+        let g = b.build();
+        let mut scratch = EvalScratch::new(&g);
+        let t0 = std::time::Instant::now();
+        let fps = [
+            Footprint::point(centre),
+            Footprint::isotropic(centre, 1e-6),
+            Footprint::isotropic(centre, 0.3),
+            Footprint::isotropic(centre, 1e3),
+            Footprint::new(centre, glam::Mat2::from_cols(Vec2::new(1e-2, 1e-2), Vec2::new(1e-2, 1e-2))),
+        ];
+        for fp in fps {
+            let v = g.eval_output(out, &fp, &mut scratch);
+            for m in &v.ch[..v.n()] {
+                assert!(
+                    m.mean.is_finite() && m.grad.is_finite() && m.var.is_finite() && m.var >= 0.0,
+                    "{what} at {fp:?}: {m:?}"
+                );
+            }
+        }
+        assert!(scratch.take_nonfinite().is_none(), "{what}");
+        assert!(t0.elapsed().as_secs_f64() < 2.0, "{what}: {:?}", t0.elapsed());
+    }
+    // The line of one point is the disk around it, at a point as over a small footprint.
+    let mut b = GraphBuilder::new();
+    let one = [
+        ("point1", c(T::Vector2, &[0.5, 0.5])),
+        ("point2", c(T::Vector2, &[0.5, 0.5])),
+        ("radius", c(T::Float, &[0.2])),
+    ];
+    let id = b.add_node("n", "line", T::Float, &one, Vec::new()).unwrap();
+    let out = b.add_output("out", T::Float, Source::Node { node: id, channel: None }).unwrap();
+    let g = b.build();
+    let mut scratch = EvalScratch::new(&g);
+    for (p, inside) in [(Vec2::new(0.6, 0.5), 1.0), (Vec2::new(0.8, 0.5), 0.0)] {
+        assert_eq!(g.eval_output(out, &Footprint::point(p), &mut scratch).ch[0].mean, inside, "{p}");
+        assert!((g.eval_output(out, &Footprint::isotropic(p, 1e-3), &mut scratch).ch[0].mean - inside).abs() < 1e-3);
+    }
+}

@@ -67,6 +67,9 @@ pub struct RenderOutput {
     /// [`crate::shading::NONFINITE_KEPT`], ordered by pixel row, column and sample), with where
     /// each came from.
     pub nonfinite: Vec<crate::shading::NonFiniteSample>,
+    /// The first samples on whose path a procedural texture value went non-finite (whether or
+    /// not their radiance did), in the same order, with where.
+    pub graph_nonfinite: Vec<crate::shading::NonFiniteSample>,
     /// Wall-clock time of the rendering phase.
     pub time: Duration,
 }
@@ -207,8 +210,13 @@ pub struct NoObserver;
 impl PathObserver for NoObserver {}
 
 /// A tile's pixels (radiance, footprint AOV), counters and graph statistics.
-type TileResult =
-    (Vec<(Spectrum, Spectrum)>, RenderCounts, Vec<graph::EvalStats>, Vec<crate::shading::NonFiniteSample>);
+type TileResult = (
+    Vec<(Spectrum, Spectrum)>,
+    RenderCounts,
+    Vec<graph::EvalStats>,
+    Vec<crate::shading::NonFiniteSample>,
+    Vec<crate::shading::NonFiniteSample>,
+);
 
 /// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
 pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
@@ -243,17 +251,18 @@ pub fn render_cached(
             progress(px.len() as u64);
             let mut stats = Vec::new();
             shade.merge_stats_into(&mut stats);
-            (px, counts, stats, std::mem::take(&mut shade.nonfinite))
+            (px, counts, stats, std::mem::take(&mut shade.nonfinite), std::mem::take(&mut shade.graph_nonfinite))
         })
         .collect();
     let mut image = Image::new(w, h);
     let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
     let mut counts = RenderCounts::default();
     let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
-    let mut nonfinite = Vec::new();
-    for (&(tx, ty), (px, c, gs, nf)) in tiles.iter().zip(&results) {
+    let (mut nonfinite, mut graph_nonfinite) = (Vec::new(), Vec::new());
+    for (&(tx, ty), (px, c, gs, nf, gnf)) in tiles.iter().zip(&results) {
         counts.add(c);
         nonfinite.extend_from_slice(nf);
+        graph_nonfinite.extend_from_slice(gnf);
         merge_graph_stats(&mut graph_stats, gs);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
@@ -265,9 +274,11 @@ pub fn render_cached(
             }
         }
     }
-    nonfinite.sort_by_key(|n: &crate::shading::NonFiniteSample| (n.y, n.x, n.sample));
-    nonfinite.truncate(crate::shading::NONFINITE_KEPT);
-    RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, time: start.elapsed() }
+    for list in [&mut nonfinite, &mut graph_nonfinite] {
+        list.sort_by_key(|n: &crate::shading::NonFiniteSample| (n.y, n.x, n.sample));
+        list.truncate(crate::shading::NONFINITE_KEPT);
+    }
+    RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, graph_nonfinite, time: start.elapsed() }
 }
 
 fn merge_graph_stats(into: &mut Vec<graph::EvalStats>, from: &[graph::EvalStats]) {
@@ -351,6 +362,7 @@ pub fn render_pixel_with<O: PathObserver>(
             counts.nonfinite_samples += 1;
             shade.record_nonfinite(x, y, s);
         }
+        shade.end_sample(x, y, s);
     }
     sum / settings.spp.max(1) as f32
 }

@@ -161,6 +161,9 @@ pub struct ShadeScratch<'a> {
     sample_origin: Option<GraphNonFinite>,
     /// The first non-finite samples of this scratch's pixels (at most [`NONFINITE_KEPT`]).
     pub(crate) nonfinite: Vec<NonFiniteSample>,
+    /// The first samples on whose path a graph value went non-finite, whether or not the
+    /// sample's radiance did (texture reads map NaN to 0); at most [`NONFINITE_KEPT`].
+    pub(crate) graph_nonfinite: Vec<NonFiniteSample>,
     scratches: Vec<EvalScratch>,
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
@@ -191,6 +194,7 @@ impl<'a> ShadeScratch<'a> {
             depth: 0,
             sample_origin: None,
             nonfinite: Vec::new(),
+            graph_nonfinite: Vec::new(),
             scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
@@ -242,6 +246,15 @@ impl<'a> ShadeScratch<'a> {
     pub(crate) fn record_nonfinite(&mut self, x: u32, y: u32, sample: u32) {
         if self.nonfinite.len() < NONFINITE_KEPT {
             self.nonfinite.push(NonFiniteSample { x, y, sample, origin: self.sample_origin.clone() });
+        }
+    }
+
+    /// Ends sample `sample` of pixel (`x`, `y`): if a graph value went non-finite on its path,
+    /// keeps where (among this scratch's first [`NONFINITE_KEPT`]).
+    #[inline]
+    pub(crate) fn end_sample(&mut self, x: u32, y: u32, sample: u32) {
+        if self.sample_origin.is_some() && self.graph_nonfinite.len() < NONFINITE_KEPT {
+            self.graph_nonfinite.push(NonFiniteSample { x, y, sample, origin: self.sample_origin.clone() });
         }
     }
 

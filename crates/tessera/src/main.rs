@@ -434,6 +434,9 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
 struct NonFiniteReport {
     samples: u64,
     first: Vec<render::shading::NonFiniteSample>,
+    /// The first shading points whose texture values went non-finite.
+    values: Vec<render::shading::NonFiniteSample>,
+    value_lines: Vec<String>,
     /// (graph index, node, evaluations in which that node was the first to go non-finite).
     nodes: Vec<(usize, graph::NodeId, u64)>,
     first_lines: Vec<String>,
@@ -459,9 +462,12 @@ impl NonFiniteReport {
                 format!("graph {}: node `{}` ({}) {n} times", sg.file_name(), g.node_name(id), g.node_category(id))
             })
             .collect();
+        let value_lines = out.graph_nonfinite.iter().map(|s| s.describe(&scene.graphs)).collect();
         NonFiniteReport {
             samples: out.counts.nonfinite_samples,
             first: out.nonfinite.clone(),
+            values: out.graph_nonfinite.clone(),
+            value_lines,
             nodes,
             first_lines,
             node_lines,
@@ -487,34 +493,33 @@ impl NonFiniteReport {
                 m += ". ";
             }
             m += &format!(
-                "procedural texture values that were not finite came first from: {}",
-                self.node_lines.join("; ")
+                "procedural texture values that were not finite came first from: {}; the first such shading points: {}",
+                self.node_lines.join("; "),
+                self.value_lines.join("; ")
             );
         }
         m
     }
 
     fn json(&self, scene: &Scene) -> serde_json::Value {
-        let first: Vec<serde_json::Value> = self
-            .first
-            .iter()
-            .map(|s| {
-                let origin = s.origin.as_ref().map(|o| {
-                    let sg = &scene.graphs[o.graph as usize];
-                    let g = sg.graph();
-                    json!({
-                        "material": o.material,
-                        "graph": sg.file_name(),
-                        "node": g.node_name(o.at.node),
-                        "category": g.node_category(o.at.node),
-                        "uv": [o.at.uv.x, o.at.uv.y],
-                        "sigma": o.at.sigma,
-                        "bounce": o.bounce,
-                    })
-                });
-                json!({ "x": s.x, "y": s.y, "sample": s.sample, "origin": origin })
-            })
-            .collect();
+        let sample_json = |s: &render::shading::NonFiniteSample| {
+            let origin = s.origin.as_ref().map(|o| {
+                let sg = &scene.graphs[o.graph as usize];
+                let g = sg.graph();
+                json!({
+                    "material": o.material,
+                    "graph": sg.file_name(),
+                    "node": g.node_name(o.at.node),
+                    "category": g.node_category(o.at.node),
+                    "uv": [o.at.uv.x, o.at.uv.y],
+                    "sigma": o.at.sigma,
+                    "bounce": o.bounce,
+                })
+            });
+            json!({ "x": s.x, "y": s.y, "sample": s.sample, "origin": origin })
+        };
+        let first: Vec<serde_json::Value> = self.first.iter().map(sample_json).collect();
+        let values: Vec<serde_json::Value> = self.values.iter().map(sample_json).collect();
         let nodes: Vec<serde_json::Value> = self
             .nodes
             .iter()
@@ -523,7 +528,7 @@ impl NonFiniteReport {
                 json!({ "graph": sg.file_name(), "node": sg.graph().node_name(id), "category": sg.graph().node_category(id), "count": n })
             })
             .collect();
-        json!({ "samples": self.samples, "first": first, "nodes": nodes })
+        json!({ "samples": self.samples, "first": first, "nodes": nodes, "values": values })
     }
 }
 

@@ -270,7 +270,14 @@ fn non_finite_texture_values_are_reported_and_strict_refuses_them() {
     let err = String::from_utf8_lossy(&out.stderr);
     // Even with --quiet: the graph, the node and how often. (Texture reads map a NaN to 0, so
     // the samples themselves stay finite: without this report the floor would only look dark.)
-    for needle in ["procedural texture values that were not finite", "nan.mtlx", "node `NG/tex` (image)", "times"] {
+    for needle in [
+        "procedural texture values that were not finite",
+        "nan.mtlx",
+        "node `NG/tex` (image)",
+        "times",
+        "material 'nan_floor'",
+        "bounce 0",
+    ] {
         assert!(err.contains(needle), "no `{needle}` in: {err}");
     }
     let stats: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("stats.json")).unwrap()).unwrap();
@@ -280,6 +287,12 @@ fn non_finite_texture_values_are_reported_and_strict_refuses_them() {
     assert_eq!(first_node["graph"], "nan.mtlx");
     let count = first_node["count"].as_u64().unwrap();
     assert!(count > 0);
+    // Where: the first shading points, with the material and the bounce.
+    let value = &stats["nonfinite"]["values"][0]["origin"];
+    assert_eq!(value["material"], "nan_floor");
+    assert_eq!(value["node"], "NG/tex");
+    assert_eq!(value["bounce"], 0);
+    assert!(value["uv"][0].as_f64().unwrap() < 0.7, "{value}");
     let node = stats["graphs"][0]["nodes"].as_array().unwrap().iter().find(|v| v["name"] == "NG/tex").unwrap().clone();
     assert_eq!(node["nonfinite"].as_u64(), Some(count), "{node}");
     // The image holds no NaN.

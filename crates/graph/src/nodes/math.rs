@@ -540,9 +540,16 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
         }
         Remap => {
             if x[1..5].iter().all(uniform) {
-                let (il, ih, ol, oh) = (x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64);
-                let k = safe_div(oh - ol, ih - il);
-                affine(a, k as f32, (ol - il * k) as f32)
+                let (il, ih, ol, oh) = (x[1].mean, x[2].mean, x[3].mean, x[4].mean);
+                // In f32, as MaterialX computes it; equal input bounds divide by zero: 0. A slope
+                // beyond the f32 range is saturated (in f64) instead.
+                let k = if ih == il { 0.0 } else { (oh - ol) / (ih - il) };
+                if k.is_finite() {
+                    affine(a, k, ol - il * k)
+                } else {
+                    let k = safe_div(oh as f64 - ol as f64, ih as f64 - il as f64);
+                    affine(a, k as f32, sat(ol as f64 - il as f64 * k))
+                }
             } else {
                 nary(&x[..5], |p| p[3] + safe_div((p[0] - p[1]) * (p[4] - p[3]), p[2] - p[1]))
             }
@@ -563,8 +570,8 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
                 let p: [f64; 6] =
                     [0.0, x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64, x[5].mean as f64];
                 if p[3] == 1.0 && !doclamp {
-                    let k = safe_div(p[5] - p[4], p[2] - p[1]);
-                    return affine(a, k as f32, (p[4] - p[1] * k) as f32);
+                    let k = safe_div(p[5] - p[4], p[2] - p[1]) as f32;
+                    return affine(a, k, p[4] as f32 - p[1] as f32 * k);
                 }
                 unary(
                     a,
