@@ -33,7 +33,7 @@
 //!
 //! Every node is total: for finite inputs it returns finite moments at every footprint. The
 //! rules the families share (overflow saturates to ±`f32::MAX`, the moment algebra in
-//! [`moments`] works in f64, division by zero is 0, `power` is OSL's `safe_pow`, Perlin noise is
+//! [`moments`] redoes in f64 what overflows f32, division by zero is 0, `power` is OSL's `safe_pow`, Perlin noise is
 //! 0 where f32 coordinates are whole numbers, fractal octaves stop where their amplitude or
 //! frequency overflows) are listed in the README; `tests/random_graphs.rs` fuzzes them. Should a
 //! value still go non-finite, the evaluator records the node it started at
