@@ -427,7 +427,7 @@ impl Graph {
             let timed = scratch.instrumented && scratch.evaluations[i].is_multiple_of(scratch.binned.period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
             let mut ctx = Ctx { fp, point, work: &mut scratch.work };
-            let v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
+            let mut v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
             if let Some(start) = start {
                 let ns = start.elapsed().as_nanos() as u64;
                 scratch.timed_ns[i] += ns;
@@ -438,12 +438,16 @@ impl Graph {
                     b.count[i * b.bins + b.current] += 1;
                 }
             }
-            if !poisoned && !is_finite(&v) {
-                // The first non-finite value of this evaluation: its node is the origin (every
-                // input was finite). Downstream nodes carry it on and are not counted.
-                poisoned = true;
-                scratch.nonfinite[i] += 1;
-                scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
+            if !is_finite(&v) {
+                // Overflow saturates (the rule every node shares); what is still not finite is a
+                // NaN. The first of this evaluation names its node as the origin (every input was
+                // finite); downstream nodes carry it on and are not counted.
+                nodes::saturate(&mut v);
+                if !poisoned && !is_finite(&v) {
+                    poisoned = true;
+                    scratch.nonfinite[i] += 1;
+                    scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
+                }
             }
             scratch.values[i] = v;
             scratch.evaluations[i] += scratch.instrumented as u64;

@@ -197,7 +197,7 @@ pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
     let varying = xs.iter().filter(|x| x.var > 0.0).count();
     // Every value of f is taken in the f32 range (saturated), so that sums of squares stay
     // finite in f64.
-    let f = |q: &[f64]| f(q).clamp(-(f32::MAX as f64), f32::MAX as f64);
+    let f = |q: &[f64]| sat64(f(q));
     let f0 = f(&p[..n]);
     let mut grad = Vec2::ZERO;
     if varying == 0 {

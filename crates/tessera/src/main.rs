@@ -322,7 +322,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 "shadow_rays": c.shadow_rays,
                 "nonfinite_samples": c.nonfinite_samples,
             },
-            "nonfinite": nonfinite.json(&scene),
+            "nonfinite": nonfinite.json(),
             "throughput": {
                 "samples_per_s": c.samples as f64 / render_s,
                 "rays_per_s": total_rays as f64 / render_s,
@@ -430,21 +430,17 @@ fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Va
 }
 
 /// What a render says about values that were not finite: samples left out of their pixels
-/// (with the first ones' origins) and graph nodes that gave non-finite values.
-struct NonFiniteReport {
-    samples: u64,
-    first: Vec<render::shading::NonFiniteSample>,
-    /// The first shading points whose texture values went non-finite.
-    values: Vec<render::shading::NonFiniteSample>,
-    value_lines: Vec<String>,
+/// (with the first ones' origins), graph nodes that gave non-finite values, and the first
+/// shading points where they did.
+struct NonFiniteReport<'a> {
+    scene: &'a Scene,
+    out: &'a render::integrator::RenderOutput,
     /// (graph index, node, evaluations in which that node was the first to go non-finite).
     nodes: Vec<(usize, graph::NodeId, u64)>,
-    first_lines: Vec<String>,
-    node_lines: Vec<String>,
 }
 
-impl NonFiniteReport {
-    fn of(scene: &Scene, out: &render::integrator::RenderOutput) -> NonFiniteReport {
+impl<'a> NonFiniteReport<'a> {
+    fn of(scene: &'a Scene, out: &'a render::integrator::RenderOutput) -> NonFiniteReport<'a> {
         let mut nodes = Vec::new();
         for (gi, st) in out.graph_stats.iter().enumerate() {
             for (ni, &n) in st.nonfinite.iter().enumerate() {
@@ -453,55 +449,51 @@ impl NonFiniteReport {
                 }
             }
         }
-        let first_lines = out.nonfinite.iter().map(|s| s.describe(&scene.graphs)).collect();
-        let node_lines = nodes
-            .iter()
-            .map(|&(gi, id, n)| {
-                let sg = &scene.graphs[gi];
-                let g = sg.graph();
-                format!("graph {}: node `{}` ({}) {n} times", sg.file_name(), g.node_name(id), g.node_category(id))
-            })
-            .collect();
-        let value_lines = out.graph_nonfinite.iter().map(|s| s.describe(&scene.graphs)).collect();
-        NonFiniteReport {
-            samples: out.counts.nonfinite_samples,
-            first: out.nonfinite.clone(),
-            values: out.graph_nonfinite.clone(),
-            value_lines,
-            nodes,
-            first_lines,
-            node_lines,
-        }
+        NonFiniteReport { scene, out, nodes }
     }
 
     fn is_clean(&self) -> bool {
-        self.samples == 0 && self.nodes.is_empty()
+        self.out.counts.nonfinite_samples == 0 && self.nodes.is_empty()
     }
 
-    /// One paragraph: the count, the first samples' origins, and the nodes.
+    /// One paragraph: the count, the first samples' origins, the nodes and the first shading
+    /// points.
     fn message(&self) -> String {
+        let graphs = &self.scene.graphs;
+        let lines = |v: &[render::shading::NonFiniteSample]| {
+            v.iter().map(|s| s.describe(graphs)).collect::<Vec<_>>().join("; ")
+        };
         let mut m = String::new();
-        if self.samples > 0 {
+        let samples = self.out.counts.nonfinite_samples;
+        if samples > 0 {
             m += &format!(
-                "{} samples had NaN or infinite radiance and were left out of their pixels; the first: {}",
-                self.samples,
-                self.first_lines.join("; ")
+                "{samples} samples had NaN or infinite radiance and were left out of their pixels; the first: {}",
+                lines(&self.out.nonfinite)
             );
         }
         if !self.nodes.is_empty() {
             if !m.is_empty() {
                 m += ". ";
             }
+            let nodes: Vec<String> = self
+                .nodes
+                .iter()
+                .map(|&(gi, id, n)| {
+                    let (sg, g) = (&graphs[gi], graphs[gi].graph());
+                    format!("graph {}: node `{}` ({}) {n} times", sg.file_name(), g.node_name(id), g.node_category(id))
+                })
+                .collect();
             m += &format!(
                 "procedural texture values that were not finite came first from: {}; the first such shading points: {}",
-                self.node_lines.join("; "),
-                self.value_lines.join("; ")
+                nodes.join("; "),
+                lines(&self.out.graph_nonfinite)
             );
         }
         m
     }
 
-    fn json(&self, scene: &Scene) -> serde_json::Value {
+    fn json(&self) -> serde_json::Value {
+        let scene = self.scene;
         let sample_json = |s: &render::shading::NonFiniteSample| {
             let origin = s.origin.as_ref().map(|o| {
                 let sg = &scene.graphs[o.graph as usize];
@@ -518,8 +510,8 @@ impl NonFiniteReport {
             });
             json!({ "x": s.x, "y": s.y, "sample": s.sample, "origin": origin })
         };
-        let first: Vec<serde_json::Value> = self.first.iter().map(sample_json).collect();
-        let values: Vec<serde_json::Value> = self.values.iter().map(sample_json).collect();
+        let first: Vec<serde_json::Value> = self.out.nonfinite.iter().map(sample_json).collect();
+        let values: Vec<serde_json::Value> = self.out.graph_nonfinite.iter().map(sample_json).collect();
         let nodes: Vec<serde_json::Value> = self
             .nodes
             .iter()
@@ -528,7 +520,7 @@ impl NonFiniteReport {
                 json!({ "graph": sg.file_name(), "node": sg.graph().node_name(id), "category": sg.graph().node_category(id), "count": n })
             })
             .collect();
-        json!({ "samples": self.samples, "first": first, "nodes": nodes, "values": values })
+        json!({ "samples": self.out.counts.nonfinite_samples, "first": first, "nodes": nodes, "values": values })
     }
 }
 

@@ -308,31 +308,19 @@ fn non_finite_texture_values_are_reported_and_strict_refuses_them() {
     assert!(img.layer_data.channel_data.pixels.iter().all(|x| x.is_finite()));
 
     // --strict: an error naming the node, and nothing written.
-    let out = tessera()
-        .current_dir(&dir)
-        .args(["render", "--quiet", "--strict", "--out", "strict.exr", "--stats-json", "strict.json"])
-        .arg(&scene)
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("--strict") && err.contains("node `NG/tex` (image)") && err.contains("nothing was written"),
-        "{err}"
+    let scene_arg = scene.to_str().unwrap();
+    expect_failure(
+        &["render", "--quiet", "--strict", "--out", "strict.exr", "--stats-json", "strict.json", scene_arg],
+        &dir,
+        &["--strict", "node `NG/tex` (image)", "nothing was written"],
     );
     assert!(!dir.join("strict.exr").exists() && !dir.join("strict.json").exists());
 
     // tessera bake never writes a NaN texel: an error naming the node and the texel.
-    let out = tessera()
-        .current_dir(&dir)
-        .args(["bake", "nan.mtlx", "--element", "NG/out", "--out", "bake.exr", "--res", "8"])
-        .output()
-        .unwrap();
-    assert!(!out.status.success());
-    let err = String::from_utf8_lossy(&out.stderr);
-    assert!(
-        err.contains("not finite") && err.contains("texel (0, 0)") && err.contains("node `NG/tex` (image)"),
-        "{err}"
+    expect_failure(
+        &["bake", "nan.mtlx", "--element", "NG/out", "--out", "bake.exr", "--res", "8"],
+        &dir,
+        &["not finite", "texel (0, 0)", "node `NG/tex` (image)"],
     );
     assert!(!dir.join("bake.exr").exists());
 }

@@ -421,9 +421,6 @@ fn modulo(a: Moments, b: Moments, fp: &Footprint) -> Moments {
 /// the same rule at 0.
 #[inline]
 pub(crate) fn power_point(x: f64, y: f64, safe: bool) -> f64 {
-    if UNGUARDED_POWER.with(|u| u.get()) {
-        return x.powf(y);
-    }
     if y == 0.0 {
         1.0
     } else if x == 0.0 {
@@ -451,16 +448,15 @@ pub fn set_unguarded_power(on: bool) {
 }
 
 fn power(a: Moments, b: Moments, safe: bool) -> Moments {
+    // Read once per evaluation, not per quadrature point.
+    let unguarded = UNGUARDED_POWER.with(|u| u.get());
+    let f = move |x: f64, y: f64| if unguarded { x.powf(y) } else { power_point(x, y, safe) };
     if uniform(&b) {
         let y = b.mean as f64;
         // The derivative of x^y is y x^(y−1) = y f(x)/x away from 0; at 0 it is taken as 0.
-        unary(
-            a,
-            move |x| power_point(x, y, safe),
-            move |x| if x == 0.0 { 0.0 } else { y * power_point(x, y, safe) / x },
-        )
+        unary(a, move |x| f(x, y), move |x| if x == 0.0 { 0.0 } else { y * f(x, y) / x })
     } else {
-        nary(&[a, b], move |p| power_point(p[0], p[1], safe))
+        nary(&[a, b], move |p| f(p[0], p[1]))
     }
 }
 

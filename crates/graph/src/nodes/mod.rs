@@ -275,18 +275,16 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
             c.grad = glam::Vec2::ZERO;
         }
     }
-    if !crate::eval::is_finite(&out) {
-        saturate(&mut out);
-    }
     out
 }
 
 /// The overflow rule every node shares: a mean or gradient beyond the largest finite `f32`
 /// saturates to ±`f32::MAX`, a variance to `f32::MAX`. Finite inputs thus never become infinite
 /// on the way through a graph (`exp(100)`, `x / 1e-40`, a product of two huge values), while a
-/// NaN stays NaN so that the evaluator can report the node that made it.
+/// NaN stays NaN so that the evaluator can report the node that made it. The evaluator applies
+/// it to every node's value that is not finite (one check per node).
 #[inline]
-fn saturate(v: &mut Filtered) {
+pub(crate) fn saturate(v: &mut Filtered) {
     const M: f32 = f32::MAX;
     for c in v.ch.iter_mut() {
         c.mean = c.mean.clamp(-M, M);
