@@ -90,13 +90,30 @@ pub fn poly_expectation(p: &Poly, lo: f64, hi: f64, m: f64, s: f64) -> f64 {
     if s <= 0.0 {
         return if lo <= m && m < hi { poly_eval(p, m) } else { 0.0 };
     }
-    let (a, b) = ((lo - m) / s, (hi - m) / s);
-    if a >= 8.5 || b <= -8.5 || a >= b {
-        return 0.0;
+    match piece_moments(lo, hi, m, s) {
+        Some(i) => dot(&poly_shift_scale(p, m, s), &i),
+        None => 0.0,
     }
-    let q = poly_shift_scale(p, m, s);
-    let i = partial_moments(a.max(-40.0), b.min(40.0));
-    q.iter().zip(i.iter()).map(|(c, ik)| c * ik).sum()
+}
+
+/// Beyond this many σ a piece's end counts as infinite (the normal's mass beyond is 1e-17).
+const PIECE_REACH: f64 = 8.5;
+
+/// The standardised partial moments of the piece `[lo, hi)` under `N(m, s²)` (`s > 0`), or
+/// `None` when it carries no mass. A piece that holds the whole footprint gets the full moments,
+/// without special functions.
+#[inline]
+fn piece_moments(lo: f64, hi: f64, m: f64, s: f64) -> Option<Poly> {
+    let (a, b) = ((lo - m) / s, (hi - m) / s);
+    if a >= PIECE_REACH || b <= -PIECE_REACH || a >= b {
+        return None;
+    }
+    Some(if a <= -PIECE_REACH && b >= PIECE_REACH { FULL_MOMENTS } else { partial_moments(a.max(-40.0), b.min(40.0)) })
+}
+
+#[inline]
+fn dot(p: &Poly, i: &Poly) -> f64 {
+    p.iter().zip(i.iter()).map(|(c, ik)| c * ik).sum()
 }
 
 /// Tail moments at a boundary `z`, from which interval moments follow by differences without
@@ -221,9 +238,19 @@ pub fn piecewise_moments(pieces: &[Piece], m: f64, s: f64) -> (f64, f64, f64) {
     let mut second = 0.0;
     let mut dmean = 0.0;
     for pc in pieces {
-        mean += poly_expectation(&pc.p, pc.lo, pc.hi, m, s);
-        second += poly_expectation(&poly_mul(&pc.p, &pc.p), pc.lo, pc.hi, m, s);
-        dmean += poly_expectation(&poly_deriv(&pc.p), pc.lo, pc.hi, m, s);
+        if s <= 0.0 {
+            if pc.lo <= m && m < pc.hi {
+                mean += poly_eval(&pc.p, m);
+                second += poly_eval(&pc.p, m).powi(2);
+                dmean += poly_eval(&poly_deriv(&pc.p), m);
+            }
+            continue;
+        }
+        // One set of partial moments per piece serves its mean, square and slope.
+        let Some(i) = piece_moments(pc.lo, pc.hi, m, s) else { continue };
+        mean += dot(&poly_shift_scale(&pc.p, m, s), &i);
+        second += dot(&poly_shift_scale(&poly_mul(&pc.p, &pc.p), m, s), &i);
+        dmean += dot(&poly_shift_scale(&poly_deriv(&pc.p), m, s), &i);
         // Jumps at the piece ends also move the mean: + φ density × jump. Handled by callers
         // whose functions jump (steps) through `step_moments`; continuous pieces need nothing.
     }

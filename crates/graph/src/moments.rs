@@ -244,19 +244,28 @@ pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
         return (f, f * f, 1.0);
     }
     if s < 0.4 {
+        // Shifted by the lowest cell within 7σ, `X' = X − lo` has the same fraction and floor
+        // `N = Σ_k 1{X' ≥ k}` over the integers k in between, which each cut the footprint:
+        // E[N] = Σ Q_k, E[X' N] = Σ (m' Q_k + s φ_k), E[N²] = Σ (2k − 1) Q_k (N² = Σ_{j ≤ N} 2j − 1),
+        // with Q_k = P(X' ≥ k) and φ_k the density there over s. One erfc and one exp per integer;
+        // a footprint inside one cell needs neither.
         let lo = (m - 7.0 * s).floor();
         let hi = (m + 7.0 * s).floor();
-        let (mut e, mut e2, mut de) = (0.0, 0.0, 0.0);
-        for k in gaussian::cells(lo, hi) {
-            // frac = x − k on [k, k+1).
-            let p1 = gaussian::poly(&[-k, 1.0]);
-            let p2 = gaussian::poly(&[k * k, -2.0 * k, 1.0]);
-            e += gaussian::poly_expectation(&p1, k, k + 1.0, m, s);
-            e2 += gaussian::poly_expectation(&p2, k, k + 1.0, m, s);
-            // d/dm: slope 1 inside, minus the jump of 1 at each integer k+1 weighted by density.
-            de += gaussian::mass((k - m) / s, (k + 1.0 - m) / s) - gaussian::pdf((k + 1.0 - m) / s) / s;
+        let m1 = m - lo;
+        let (mut en, mut exn, mut en2, mut dens) = (0.0, 0.0, 0.0, 0.0);
+        for k in gaussian::cells(1.0, hi - lo) {
+            let z = (k - m1) / s;
+            let q = gaussian::cdf(-z);
+            let phi = gaussian::pdf(z);
+            en += q;
+            exn += m1 * q + s * phi;
+            en2 += (2.0 * k - 1.0) * q;
+            dens += phi / s;
         }
-        (e, e2, de)
+        // frac = X' − N.
+        let e = m1 - en;
+        let e2 = (m1 * m1 + s * s - 2.0 * exn + en2).max(0.0);
+        (e, e2, 1.0 - dens)
     } else {
         // frac(x) = 1/2 − Σ sin(2πnx)/(πn);  frac² = 1/3 + Σ [cos(2πnx)/(π²n²) − sin(2πnx)/(πn)].
         let (mut e, mut e2, mut de) = (0.5, 1.0 / 3.0, 0.0);

@@ -11,6 +11,7 @@ pub(crate) mod geometry;
 pub(crate) mod hash;
 pub(crate) mod hextile;
 pub(crate) mod image;
+pub(crate) mod kernel_table;
 pub(crate) mod math;
 pub(crate) mod noise;
 pub(crate) mod noise3d;
