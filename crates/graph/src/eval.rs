@@ -412,22 +412,68 @@ impl Graph {
             }
         }
         // Nodes that read their inputs' gradients (heighttonormal) need them at points too.
-        let point =
-            is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].category == "heighttonormal");
+        let point = is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].reads_gradients);
         let mut ins = [Filtered::zero(ValueType::Float); nodes::MAX_INPUTS];
+        // The texture coordinate, once per evaluation (inputs copy it, and the nodes' constant
+        // inputs, from values built beforehand: a value assembled field by field and copied
+        // whole at once stalls the copy).
+        let tc = geometry::texcoord(&Ctx { fp, point, work: &mut Work::default() });
+        self.forward(fp, point, &tc, &mut ins, scratch, false);
+        // Values are checked once all are done (checking each right after its node wrote it
+        // stalls on the fresh stores). Only if one is not finite is the evaluation run again, one
+        // node at a time with the rule every node shares: overflow saturates, the first NaN
+        // names its node. The result is the same as checking each node as it goes.
+        if scratch.order.iter().any(|id| !is_finite(&scratch.values[id.0 as usize])) {
+            self.forward(fp, point, &tc, &mut ins, scratch, true);
+        }
+    }
+
+    /// Evaluates `scratch.order` (last to first). `careful`: saturate each node's overflow and
+    /// record the first NaN's origin, without counting the evaluations again.
+    fn forward(
+        &self,
+        fp: &Footprint,
+        point: bool,
+        tc: &Filtered,
+        ins: &mut [Filtered; nodes::MAX_INPUTS],
+        scratch: &mut EvalScratch,
+        careful: bool,
+    ) {
         let mut poisoned = false;
+        let mut spare = Work::default();
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];
             let node = &self.nodes[id.0 as usize];
-            for (slot, s) in ins.iter_mut().zip(&node.inputs) {
-                *slot = self.resolve(s, fp, point, scratch);
+            for ((slot, s), c) in ins.iter_mut().zip(&node.inputs).zip(node.consts.iter()) {
+                *slot = match s {
+                    Source::Constant(_) => *c,
+                    Source::Texcoord => *tc,
+                    _ => self.resolve(s, fp, point, scratch),
+                };
             }
             let n_in = node.inputs.len();
             let i = id.0 as usize;
+            if careful {
+                let mut ctx = Ctx { fp, point, work: &mut spare };
+                let mut v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
+                if !is_finite(&v) {
+                    // Overflow saturates; what is still not finite is a NaN. The first of this
+                    // evaluation names its node as the origin (every input was finite);
+                    // downstream nodes carry it on and are not counted.
+                    nodes::saturate(&mut v);
+                    if !poisoned && !is_finite(&v) {
+                        poisoned = true;
+                        scratch.nonfinite[i] += 1;
+                        scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
+                    }
+                }
+                scratch.values[i] = v;
+                continue;
+            }
             let timed = scratch.instrumented && scratch.evaluations[i].is_multiple_of(scratch.binned.period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
             let mut ctx = Ctx { fp, point, work: &mut scratch.work };
-            let mut v = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
+            scratch.values[i] = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
             if let Some(start) = start {
                 let ns = start.elapsed().as_nanos() as u64;
                 scratch.timed_ns[i] += ns;
@@ -438,18 +484,6 @@ impl Graph {
                     b.count[i * b.bins + b.current] += 1;
                 }
             }
-            if !is_finite(&v) {
-                // Overflow saturates (the rule every node shares); what is still not finite is a
-                // NaN. The first of this evaluation names its node as the origin (every input was
-                // finite); downstream nodes carry it on and are not counted.
-                nodes::saturate(&mut v);
-                if !poisoned && !is_finite(&v) {
-                    poisoned = true;
-                    scratch.nonfinite[i] += 1;
-                    scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
-                }
-            }
-            scratch.values[i] = v;
             scratch.evaluations[i] += scratch.instrumented as u64;
         }
     }

@@ -2,7 +2,7 @@
 
 use crate::error::BuildError;
 use crate::nodes::{self, Op, Param};
-use crate::value::{Value, ValueType};
+use crate::value::{Filtered, Value, ValueType};
 use std::collections::HashMap;
 
 /// Stable index of a node in its [`Graph`] (valid for the graph's lifetime).
@@ -53,6 +53,11 @@ pub(crate) struct Node {
     pub op: Op,
     pub ty: ValueType,
     pub inputs: Vec<Source>,
+    /// Per input: its value as a `Filtered` where it is a constant (zero otherwise), built once
+    /// so that evaluation copies it instead of assembling it.
+    pub consts: Box<[Filtered]>,
+    /// Whether the node reads its inputs' gradients even at point footprints (heighttonormal).
+    pub reads_gradients: bool,
     pub params: Vec<Param>,
     /// This node and every node it depends on, ascending (= topological order).
     pub plan: Box<[NodeId]>,
@@ -289,12 +294,21 @@ impl GraphBuilder {
         plan.push(id);
         plan.sort_unstable();
         plan.dedup();
+        let consts = srcs
+            .iter()
+            .map(|s| match s {
+                Source::Constant(v) => Filtered::constant(*v),
+                _ => Filtered::zero(ValueType::Float),
+            })
+            .collect();
         self.nodes.push(Node {
             name: name.to_string(),
             category: def.category,
             op,
             ty,
             inputs: srcs,
+            consts,
+            reads_gradients: def.category == "heighttonormal",
             params,
             plan: plan.into_boxed_slice(),
             uv_only,

@@ -11,7 +11,8 @@
 //! Perlin noise is `0.6616 Σ_c (g_c · (p − c)) W(pₓ − cₓ) W(p_y − c_y)` over lattice corners
 //! `c` with `W(d) = 1 − fade(|d|)`: each corner's kernel is separable, so for a footprint with
 //! per-axis spreads `σₓ, σ_y` (the marginals: correlation is ignored) its Gaussian average is a
-//! sum of products of 1D expectations of piecewise polynomials ([`gaussian::poly_expectation`]).
+//! sum of products of 1D expectations of piecewise polynomials, integrated exactly by
+//! [`axis_terms_exact`] and read by the filters from the table of [`super::kernel_table`].
 //! Vector outputs use MaterialX's per-channel hash bytes; `vector4`'s fourth channel is float
 //! noise at `t + (19, 73)` (`fractal2d`: `t + (19, 193)`), `fractal2d` `vector2` is two float
 //! fractals at `t` and `t + (19, 193)`.
@@ -409,7 +410,7 @@ fn kernel() -> &'static Kernel {
 
 /// 1D expectations for lattice coordinate `c`: E[W], E[dW], dE[W]/dm, dE[dW]/dm.
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct AxisTerms {
+pub(crate) struct AxisTerms {
     pub w: f64,
     pub dw: f64,
     pub w1: f64,
