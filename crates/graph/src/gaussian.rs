@@ -20,6 +20,18 @@ pub fn cdf(z: f64) -> f64 {
     0.5 * libm::erfc(-z * FRAC_1_SQRT_2)
 }
 
+/// `(Φ(z), 1 − Φ(z))` from one erfc, each accurate in its own tail.
+#[inline]
+pub fn tails(z: f64) -> (f64, f64) {
+    if z > 0.0 {
+        let q = cdf(-z);
+        (1.0 - q, q)
+    } else {
+        let p = cdf(z);
+        (p, 1.0 - p)
+    }
+}
+
 /// Φ(b) − Φ(a) without cancellation when both lie in the same tail.
 #[inline]
 pub fn mass(a: f64, b: f64) -> f64 {

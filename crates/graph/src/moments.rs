@@ -236,19 +236,33 @@ pub fn nary(xs: &[Moments], f: impl Fn(&[f64]) -> f64) -> Moments {
     Moments { mean: sat(e), grad, var: sat((e2 - e * e).max(0.0)) }
 }
 
-/// `E`, `E²` and `dE/dm` of `frac(X)` (`x − floor x`).
-pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
+/// Moments of `frac(X)` (`x − floor x`) for `X ~ N(m, s²)`, and the mean of `floor(X)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FracMoments {
+    /// `E[frac X]`.
+    pub mean: f64,
+    /// `Var[frac X]`.
+    pub var: f64,
+    /// `d E[frac X] / dm` (1 minus the density of the integers the footprint crosses).
+    pub dmean: f64,
+    /// `E[floor X]`, exactly the cell's integer when the footprint lies within one cell.
+    pub floor: f64,
+}
+
+/// [`FracMoments`] of `N(m, s²)`.
+pub fn frac_moments(m: f64, s: f64) -> FracMoments {
     use std::f64::consts::PI;
     if s <= 0.0 {
         let f = m - m.floor();
-        return (f, f * f, 1.0);
+        return FracMoments { mean: f, var: 0.0, dmean: 1.0, floor: m.floor() };
     }
     if s < 0.4 {
         // Shifted by the lowest cell within 7σ, `X' = X − lo` has the same fraction and floor
         // `N = Σ_k 1{X' ≥ k}` over the integers k in between, which each cut the footprint:
         // E[N] = Σ Q_k, E[X' N] = Σ (m' Q_k + s φ_k), E[N²] = Σ (2k − 1) Q_k (N² = Σ_{j ≤ N} 2j − 1),
         // with Q_k = P(X' ≥ k) and φ_k the density there over s. One erfc and one exp per integer;
-        // a footprint inside one cell needs neither.
+        // a footprint inside one cell needs neither, and its floor is that cell's integer exactly
+        // (no spread: a cell noise of it is the cell's own value, not a blend with the next).
         let lo = (m - 7.0 * s).floor();
         let hi = (m + 7.0 * s).floor();
         let m1 = m - lo;
@@ -262,10 +276,12 @@ pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
             en2 += (2.0 * k - 1.0) * q;
             dens += phi / s;
         }
-        // frac = X' − N.
-        let e = m1 - en;
-        let e2 = (m1 * m1 + s * s - 2.0 * exn + en2).max(0.0);
-        (e, e2, 1.0 - dens)
+        // frac = X' − N: Var = s² + Var N − 2 Cov(X', N), each part central (no cancellation
+        // against m'²), and exactly s² when nothing is crossed.
+        let var_n = (en2 - en * en).max(0.0);
+        let cov = exn - m1 * en;
+        let var = (s * s + var_n - 2.0 * cov).max(0.0);
+        FracMoments { mean: m1 - en, var, dmean: 1.0 - dens, floor: lo + en }
     } else {
         // frac(x) = 1/2 − Σ sin(2πnx)/(πn);  frac² = 1/3 + Σ [cos(2πnx)/(π²n²) − sin(2πnx)/(πn)].
         let (mut e, mut e2, mut de) = (0.5, 1.0 / 3.0, 0.0);
@@ -281,6 +297,6 @@ pub fn frac_moments(m: f64, s: f64) -> (f64, f64, f64) {
             e2 += (cs / (PI * PI * nf * nf) - sn / (PI * nf)) * att;
             de -= w * cs * att / (PI * nf);
         }
-        (e, e2, de)
+        FracMoments { mean: e, var: (e2 - e * e).max(0.0), dmean: de, floor: m - e }
     }
 }

@@ -439,19 +439,25 @@ impl NodeCache {
 pub struct CacheAccess<'a> {
     cache: &'a NodeCache,
     graphs: &'a [SceneGraph],
+    /// Per graph: scratches for fills (a fill can need another cached node's fill, so one is
+    /// taken per nesting level). Their statistics accumulate until read by
+    /// [`CacheAccess::merge_fill_stats_into`]: merging them per fill cost more than a cheap
+    /// texel's evaluation.
     pool: RefCell<Vec<Vec<EvalScratch>>>,
-    /// Statistics of fill evaluations, merged at the end.
-    pub(crate) fill_stats: RefCell<Vec<graph::EvalStats>>,
 }
 
 impl<'a> CacheAccess<'a> {
     /// Access for one thread.
     pub fn new(cache: &'a NodeCache, graphs: &'a [SceneGraph]) -> Self {
-        CacheAccess {
-            cache,
-            graphs,
-            pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()),
-            fill_stats: RefCell::new(vec![graph::EvalStats::default(); graphs.len()]),
+        CacheAccess { cache, graphs, pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()) }
+    }
+
+    /// Adds the statistics of every fill evaluation so far to `stats` (one entry per graph).
+    pub(crate) fn merge_fill_stats_into(&self, stats: &mut [graph::EvalStats]) {
+        for (scratches, out) in self.pool.borrow().iter().zip(stats.iter_mut()) {
+            for s in scratches {
+                s.merge_stats_into(out);
+            }
         }
     }
 
@@ -464,8 +470,6 @@ impl<'a> CacheAccess<'a> {
         let g = self.graphs[graph as usize].graph();
         let mut scratch = self.pool.borrow_mut()[graph as usize].pop().unwrap_or_else(|| EvalScratch::new(g));
         let f = g.eval_node_direct(node, fp, &mut scratch, &self.for_graph(graph));
-        scratch.merge_stats_into(&mut self.fill_stats.borrow_mut()[graph as usize]);
-        scratch.reset_stats();
         self.pool.borrow_mut()[graph as usize].push(scratch);
         f
     }

@@ -270,9 +270,7 @@ impl<'a> ShadeScratch<'a> {
             s.merge_stats_into(out);
         }
         if let Some(access) = &self.cache {
-            for (fill, out) in access.fill_stats.borrow().iter().zip(stats.iter_mut()) {
-                out.merge(fill);
-            }
+            access.merge_fill_stats_into(stats);
         }
     }
 }

@@ -170,9 +170,7 @@ fn lookup_in(tab: &[Node], rows: &Rows, d: f64) -> AxisTerms {
     // In s, by Hermite with the slope ∂f/∂s = s ∂²f/∂d²: w from its second derivative, w' from
     // its third, likewise for dw.
     let b = &rows.b;
-    let sl = |k: usize| {
-        (b[0] * r0[k] + b[1] * rows.k0 * r0[k + 2] + b[2] * r1[k] + b[3] * rows.k1 * r1[k + 2]) as f64
-    };
+    let sl = |k: usize| (b[0] * r0[k] + b[1] * rows.k0 * r0[k + 2] + b[2] * r1[k] + b[3] * rows.k1 * r1[k + 2]) as f64;
     let (w, w1, dw, dw1) = (sl(0), sl(1), sl(4), sl(5));
     // Parity: w and dw' even in d, w' and dw odd.
     let sign = if d < 0.0 { -1.0 } else { 1.0 };

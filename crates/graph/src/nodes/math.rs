@@ -364,16 +364,16 @@ fn min2(a: Moments, b: Moments, fp: &Footprint) -> Moments {
 
 fn floor_of(x: Moments) -> Moments {
     let (m, s) = (x.mean as f64, x.sigma() as f64);
-    let (e, e2, de) = frac_moments(m, s);
-    // floor = x − frac; Var ≈ s² + Var[frac] − 2 Cov(x, frac), Cov(x, frac) = s² E[frac'] (Stein).
-    let vfrac = (e2 - e * e).max(0.0);
-    let var = (s * s + vfrac - 2.0 * s * s * de).max(0.0);
-    Moments { mean: (m - e) as f32, grad: x.grad * (1.0 - de) as f32, var: var as f32 }
+    let f = frac_moments(m, s);
+    // floor = x − frac; Var ≈ s² + Var[frac] − 2 Cov(x, frac), Cov(x, frac) = s² E[frac'] (Stein):
+    // 0 exactly for a footprint inside one cell.
+    let var = (s * s + f.var - 2.0 * s * s * f.dmean).max(0.0);
+    Moments { mean: f.floor as f32, grad: x.grad * (1.0 - f.dmean) as f32, var: var as f32 }
 }
 
 fn fract_of(x: Moments) -> Moments {
-    let (e, e2, de) = frac_moments(x.mean as f64, x.sigma() as f64);
-    Moments { mean: e as f32, grad: x.grad * de as f32, var: (e2 - e * e).max(0.0) as f32 }
+    let f = frac_moments(x.mean as f64, x.sigma() as f64);
+    Moments { mean: f.mean as f32, grad: x.grad * f.dmean as f32, var: f.var as f32 }
 }
 
 fn sin_of(x: Moments, cosine: bool) -> Moments {

@@ -469,7 +469,13 @@ fn dot(p: &Poly, r: &Poly) -> f64 {
 /// moments shared at the integer boundaries, and serve both coordinates that meet the cell.
 /// The filters read these through [`axis_terms`] (tabulated); this is the table's source and the
 /// tests' reference.
-pub(super) fn axis_terms_exact<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); N]) -> usize {
+pub(super) fn axis_terms_exact<const N: usize>(
+    m: f64,
+    s: f64,
+    lo: i32,
+    hi: i32,
+    out: &mut [(i32, AxisTerms); N],
+) -> usize {
     let k = kernel();
     let z = |c: i32| (c as f64 - m) / s;
     let tail = |c: i32| gaussian::TailMoments::at(z(c));
@@ -876,11 +882,22 @@ fn cellnoise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         }
         let lo = (m - 4.0 * s).floor() as i32;
         let hi = (m + 4.0 * s).floor() as i32;
+        // One erfc and one exp per cell boundary, each shared by the cells on both sides.
+        let edge = |c: i32| {
+            let z = (c as f64 - m) / s;
+            let (below, above) = gaussian::tails(z);
+            (z, below, above, gaussian::pdf(z))
+        };
+        let mut a = edge(lo);
         let mut n = 0;
         for c in lo..=hi.min(lo + 7) {
-            let (a, b) = ((c as f64 - m) / s, (c as f64 + 1.0 - m) / s);
-            buf[n] = (c, gaussian::mass(a, b), (gaussian::pdf(a) - gaussian::pdf(b)) / s);
+            let b = edge(c + 1);
+            let ((za, below_a, above_a, pdf_a), (_, below_b, above_b, pdf_b)) = (a, b);
+            // Φ(b) − Φ(a), from the upper tails when both lie above the mean.
+            let mass = if za > 0.0 { above_a - above_b } else { below_b - below_a };
+            buf[n] = (c, mass, (pdf_a - pdf_b) / s);
             n += 1;
+            a = b;
         }
         n
     };
