@@ -18,10 +18,12 @@
 //!   interpolated row already holds;
 //! - the functions' parity (`E[W]` and `∂E[dW]` even in `d`, the other two odd) halves the table.
 //!
-//! The table (1.5 MiB) is built once, on first use, from the exact integrals; the tests bound its
-//! error against them.
+//! The table (1.5 MiB) is built once, on first use (about 9 ms), from the exact integrals; the
+//! tests bound its error against them.
 
-use super::noise::{axis_terms_exact, AxisTerms};
+#[cfg(test)]
+use super::noise::axis_terms_exact;
+use super::noise::{kernel_expectations, AxisTerms};
 use std::sync::OnceLock;
 
 /// Nodes per lattice unit along `d`.
@@ -50,36 +52,16 @@ fn table() -> &'static [Node] {
     T.get_or_init(build)
 }
 
-/// Builds the table from the exact integrals: values and first derivatives directly, the second
-/// and third derivatives by central differences of the first (step 1e-4, far below the spread of
-/// every row but the first); the first row (`s = 0`) from the kernel's polynomials.
+/// Builds the table from the exact integrals ([`kernel_expectations`]: the kernel's derivatives
+/// averaged, from one set of cell moments per node); the first row (`s = 0`) from the kernel's
+/// polynomials.
 fn build() -> Box<[Node]> {
     let mut t = vec![[0.0f64; 8]; ND * NS];
-    let exact = |d: f64, s: f64| -> AxisTerms {
-        let mut out = [(0, AxisTerms::default()); 1];
-        axis_terms_exact(d, s, 0, 0, &mut out);
-        out[0].1
-    };
     for j in 0..NS {
         let s = j as f64 / S_RES;
         for i in 0..ND {
             let d = i as f64 / D_RES;
-            t[j * ND + i] = if j == 0 {
-                kernel_at(d)
-            } else {
-                let h = 1e-4;
-                let (a, b, c) = (exact(d - h, s), exact(d, s), exact(d + h, s));
-                [
-                    b.w,
-                    b.w1,
-                    (c.w1 - a.w1) / (2.0 * h),
-                    (c.w1 - 2.0 * b.w1 + a.w1) / (h * h),
-                    b.dw,
-                    b.dw1,
-                    (c.dw1 - a.dw1) / (2.0 * h),
-                    (c.dw1 - 2.0 * b.dw1 + a.dw1) / (h * h),
-                ]
-            };
+            t[j * ND + i] = if j == 0 { kernel_at(d) } else { kernel_expectations(d, s) };
         }
     }
     let hd = 1.0 / D_RES;
@@ -231,6 +213,34 @@ mod tests {
         println!("worst value error {worst_v:.2e}, derivative error {worst_g:.2e} at (d, s) = {at:?}");
         assert!(worst_v < 1e-6, "value error {worst_v:.2e}");
         assert!(worst_g < 3e-4, "derivative error {worst_g:.2e}");
+    }
+
+    /// The table's source: the averaged kernel and its first derivatives are the exact axis
+    /// terms, and each higher derivative is the finite difference of the one below.
+    #[test]
+    fn kernel_expectations_are_the_axis_terms_and_their_derivatives() {
+        let mut u = uniforms(11);
+        for _ in 0..2000 {
+            let s = 0.003 + u() * (S_MAX - 0.003);
+            let d = (2.0 * u() - 1.0) * (1.0 + 3.5 * s);
+            let e = kernel_expectations(d, s);
+            let mut a = [(0, AxisTerms::default()); 1];
+            axis_terms_exact(d, s, 0, 0, &mut a);
+            let a = a[0].1;
+            for (x, y) in [(e[0], a.w), (e[1], a.w1), (e[4], a.dw), (e[5], a.dw1)] {
+                assert!((x - y).abs() < 1e-12, "d {d} s {s}: {x} vs {y}");
+            }
+            let h = 1e-5 * s.max(0.01);
+            let (lo, hi) = (kernel_expectations(d - h, s), kernel_expectations(d + h, s));
+            for k in [1usize, 2, 5, 6] {
+                let fd = (hi[k] - lo[k]) / (2.0 * h);
+                assert!(
+                    (fd - e[k + 1]).abs() < 1e-4 * (1.0 + e[k + 1].abs()),
+                    "d {d} s {s} k {k}: {fd} vs {}",
+                    e[k + 1]
+                );
+            }
+        }
     }
 
     /// The first row is the kernel: its derivatives agree with finite differences of itself.

@@ -515,6 +515,34 @@ pub(super) fn axis_terms_exact<const N: usize>(
     n
 }
 
+/// The Gaussian averages `E[q(d + sZ)]` of the kernel's derivatives, for the table of
+/// [`super::kernel_table`]: `q` = W, W′, W″, W‴, dW, (dW)′, (dW)″, (dW)‴ (`s > 0`). Each is a
+/// piecewise polynomial on the two unit cells around 0, so all eight read the same two sets of
+/// cell moments (the third derivatives jump at 0 and ±1 but the second are continuous, so these
+/// are also the `d`-derivatives of the averages).
+pub(super) fn kernel_expectations(d: f64, s: f64) -> [f64; 8] {
+    let z = |c: f64| (c - d) / s;
+    let (t0, t1, t2) =
+        (gaussian::TailMoments::at(z(-1.0)), gaussian::TailMoments::at(z(0.0)), gaussian::TailMoments::at(z(1.0)));
+    // Cell [-1, 0) in y = x + 1, cell [0, 1) in y = x.
+    let below = unit_moments(d + 1.0, s, &gaussian::TailMoments::between(&t0, &t1));
+    let above = unit_moments(d, s, &gaussian::TailMoments::between(&t1, &t2));
+    let wn = poly(&[1.0, 0.0, 0.0, 10.0, 15.0, 6.0]);
+    let wp = poly(&[1.0, 0.0, 0.0, -10.0, 15.0, -6.0]);
+    let x = poly(&[0.0, 1.0]);
+    let up = |p: &Poly| gaussian::poly_shift_scale(p, -1.0, 1.0);
+    let mut out = [0.0; 8];
+    for (base, (n, p)) in [(0, (wn, wp)), (4, (poly_mul(&x, &wn), poly_mul(&x, &wp)))] {
+        let (mut n, mut p) = (n, p);
+        for k in 0..4 {
+            out[base + k] = dot(&up(&n), &below) + dot(&p, &above);
+            n = poly_deriv(&n);
+            p = poly_deriv(&p);
+        }
+    }
+    out
+}
+
 /// [`axis_terms_exact`] as the filters use it: from the table of [`super::kernel_table`] for
 /// spreads it covers (all the filters ask for), exactly beyond.
 #[inline]
