@@ -33,6 +33,11 @@ impl Work {
 pub trait NodeOverride {
     /// The node's filtered value at `fp`, or `None` to evaluate it.
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered>;
+
+    /// Whether it never answers (then evaluation skips asking it node by node).
+    fn never_answers(&self) -> bool {
+        false
+    }
 }
 
 /// The override that never answers: plain evaluation.
@@ -43,6 +48,10 @@ impl NodeOverride for NoOverride {
     #[inline]
     fn lookup(&self, _: NodeId, _: &Footprint) -> Option<Filtered> {
         None
+    }
+
+    fn never_answers(&self) -> bool {
+        true
     }
 }
 
@@ -392,22 +401,27 @@ impl Graph {
         ov: &dyn NodeOverride,
     ) {
         scratch.order.clear();
-        for &id in plan.iter().rev() {
-            let i = id.0 as usize;
-            if !scratch.needed[i] {
-                continue;
-            }
-            if direct != Some(id) {
-                if let Some(v) = ov.lookup(id, fp) {
-                    scratch.values[i] = v;
-                    scratch.lookups[i] += 1;
+        if ov.never_answers() {
+            // Every node of a plan is upstream of what it was made for, so all are needed.
+            scratch.order.extend(plan.iter().rev());
+        } else {
+            for &id in plan.iter().rev() {
+                let i = id.0 as usize;
+                if !scratch.needed[i] {
                     continue;
                 }
-            }
-            scratch.order.push(id);
-            for s in &self.nodes[i].inputs {
-                if let Source::Node { node, .. } = s {
-                    scratch.needed[node.0 as usize] = true;
+                if direct != Some(id) {
+                    if let Some(v) = ov.lookup(id, fp) {
+                        scratch.values[i] = v;
+                        scratch.lookups[i] += 1;
+                        continue;
+                    }
+                }
+                scratch.order.push(id);
+                for s in &self.nodes[i].inputs {
+                    if let Source::Node { node, .. } = s {
+                        scratch.needed[node.0 as usize] = true;
+                    }
                 }
             }
         }
