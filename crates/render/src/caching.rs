@@ -151,6 +151,8 @@ pub struct NodeCache {
     baked: bool,
     /// Per graph, per node: the finest level served from the cache (finer requests evaluate).
     min_level: Vec<Vec<u8>>,
+    /// Per graph: whether none of its nodes is cached (its evaluations never ask the cache).
+    uncached: Vec<bool>,
 }
 
 /// A uv rectangle `(min, max)`.
@@ -341,7 +343,8 @@ impl NodeCache {
         // Trilinear, not anisotropic probes: on the demo scenes the probes filled 8× more texels
         // (finer levels along grazing footprints) and made caching slower than evaluating;
         // trilinear blurs elongated footprints along their minor axis instead.
-        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked, min_level };
+        let uncached = textures.iter().map(|t| t.iter().all(Option::is_none)).collect();
+        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked, min_level, uncached };
         if baked {
             nc.bake(graphs, &rects)?;
         }
@@ -482,6 +485,10 @@ pub struct GraphOverride<'s, 'a> {
 }
 
 impl NodeOverride for GraphOverride<'_, '_> {
+    fn never_answers(&self) -> bool {
+        self.access.cache.uncached[self.graph as usize]
+    }
+
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
         let tex = nc.textures[self.graph as usize][node.0 as usize]?;
