@@ -300,3 +300,58 @@ pub fn frac_moments(m: f64, s: f64) -> FracMoments {
         FracMoments { mean: e, var: (e2 - e * e).max(0.0), dmean: de, floor: m - e }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `E[g(X)]` for `X ~ N(m, s²)` by the midpoint rule over ±9σ (400 000 points).
+    fn quadrature(m: f64, s: f64, g: impl Fn(f64) -> f64) -> f64 {
+        let n = 400_000;
+        let (lo, h) = (m - 9.0 * s, 18.0 * s / n as f64);
+        let (mut acc, mut wsum) = (0.0, 0.0);
+        for i in 0..n {
+            let x = lo + (i as f64 + 0.5) * h;
+            let w = (-0.5 * ((x - m) / s).powi(2)).exp();
+            acc += w * g(x);
+            wsum += w;
+        }
+        acc / wsum
+    }
+
+    /// Mean, variance, slope and the floor's mean of frac against direct integration, on both
+    /// sides of the small-spread / Fourier switch and far from the origin.
+    #[test]
+    fn frac_moments_match_direct_integration() {
+        for &(m, s) in
+            &[(0.3, 0.05), (2.97, 0.02), (-7.5, 0.2), (1234.6, 0.35), (0.1, 0.45), (-40.2, 1.3), (3.0, 0.001)]
+        {
+            let f = frac_moments(m, s);
+            let frac = |x: f64| x - x.floor();
+            let e = quadrature(m, s, frac);
+            let var = quadrature(m, s, |x| (frac(x) - e).powi(2));
+            let fl = quadrature(m, s, f64::floor);
+            // A step of a hundredth of σ: the quadrature's grid moves with m, so a smaller one
+            // would difference its discretisation of the jump.
+            let h = 1e-2 * s;
+            let slope = (quadrature(m + h, s, frac) - quadrature(m - h, s, frac)) / (2.0 * h);
+            let tol = 2e-4;
+            assert!((f.mean - e).abs() < tol, "m {m} s {s}: mean {} vs {e}", f.mean);
+            assert!((f.var - var).abs() < tol, "m {m} s {s}: var {} vs {var}", f.var);
+            assert!((f.floor - fl).abs() < tol, "m {m} s {s}: floor {} vs {fl}", f.floor);
+            assert!((f.dmean - slope).abs() < 2e-2 * (1.0 + slope.abs()), "m {m} s {s}: slope {} vs {slope}", f.dmean);
+        }
+    }
+
+    /// A footprint inside one cell: the floor is that cell's integer, with no spread or slope (a
+    /// spread made of rounding noise put cell noise of it on a cell edge).
+    #[test]
+    fn floor_inside_one_cell_is_exact() {
+        for &(m, s) in &[(0.5, 0.01), (1e4 + 0.37, 0.02), (-3.6, 1e-6), (7.9, 1e-3)] {
+            let f = frac_moments(m, s);
+            assert_eq!(f.floor, m.floor(), "m {m} s {s}");
+            assert_eq!(f.dmean, 1.0, "m {m} s {s}");
+            assert_eq!(f.var, s * s, "m {m} s {s}");
+        }
+    }
+}
