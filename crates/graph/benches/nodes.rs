@@ -1,6 +1,6 @@
 //! ns per evaluation of single nodes, by node type: each node reads `texcoord × 8` (or a noise of
-//! it, for the math nodes), unfiltered and filtered at σ = 1e-3 and 1e-2 uv units. The cost of
-//! the texcoord and scale nodes is included in every row (measure `multiply` for it alone).
+//! it, for the math nodes), unfiltered and filtered at σ = 1e-5 to 10 uv units. The cost of the
+//! texcoord and scale nodes is included in every row (measure `multiply` for it alone).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use glam::Vec2;
@@ -40,7 +40,10 @@ const NODES: &[(&str, &str, &str)] = &[
 fn nodes(c: &mut Criterion) {
     let uvs: Vec<Vec2> = (0..64).map(|i| Vec2::new((i as f32 * 0.618034) % 1.0, (i as f32 * 0.754878) % 1.0)).collect();
     let mut group = c.benchmark_group("node_eval");
-    group.sample_size(20).measurement_time(std::time::Duration::from_secs(1));
+    group
+        .sample_size(20)
+        .warm_up_time(std::time::Duration::from_millis(500))
+        .measurement_time(std::time::Duration::from_secs(1));
     group.throughput(Throughput::Elements(uvs.len() as u64));
     for &(category, ty, body) in NODES {
         let text = format!(
@@ -55,7 +58,7 @@ fn nodes(c: &mut Criterion) {
         let g = doc.graph();
         let out = g.output_id("out").or_else(|| g.output_id("g/out")).expect("output");
         let mut scratch = EvalScratch::new(g);
-        for sigma in [0.0f32, 1e-3, 1e-2] {
+        for sigma in [0.0f32, 1e-5, 1e-3, 1e-2, 1e-1, 1.0, 10.0] {
             group.bench_with_input(BenchmarkId::new(category, format!("sigma={sigma:e}")), &sigma, |b, &sigma| {
                 b.iter(|| {
                     for uv in &uvs {

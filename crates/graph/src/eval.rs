@@ -95,6 +95,8 @@ pub struct EvalScratch {
     nonfinite: Vec<u64>,
     /// The origin of the most recent evaluation that went non-finite, until taken.
     latest_nonfinite: Option<NonFinite>,
+    /// Input slots of the node being evaluated ([`nodes::MAX_INPUTS`] of them).
+    ins: Vec<Filtered>,
 }
 
 /// Where a graph evaluation first produced a value that is not finite: the node whose inputs were
@@ -228,6 +230,7 @@ impl EvalScratch {
             instrumented: true,
             nonfinite: vec![0; n],
             latest_nonfinite: None,
+            ins: vec![Filtered::zero(ValueType::Float); nodes::MAX_INPUTS],
         }
     }
 
@@ -427,7 +430,13 @@ impl Graph {
         }
         // Nodes that read their inputs' gradients (heighttonormal) need them at points too.
         let point = is_point(fp) && !scratch.order.iter().any(|id| self.nodes[id.0 as usize].reads_gradients);
-        let mut ins = [Filtered::zero(ValueType::Float); nodes::MAX_INPUTS];
+        // The input slots live in the scratch: zeroing 24 of them per evaluation cost as much as
+        // a cheap node.
+        let mut ins = std::mem::take(&mut scratch.ins);
+        if ins.len() < nodes::MAX_INPUTS {
+            // Only after an evaluation that panicked and never put them back.
+            ins = vec![Filtered::zero(ValueType::Float); nodes::MAX_INPUTS];
+        }
         // The texture coordinate, once per evaluation (inputs copy it, and the nodes' constant
         // inputs, from values built beforehand: a value assembled field by field and copied
         // whole at once stalls the copy).
@@ -440,6 +449,7 @@ impl Graph {
         if scratch.order.iter().any(|id| !is_finite(&scratch.values[id.0 as usize])) {
             self.forward(fp, point, &tc, &mut ins, scratch, true);
         }
+        scratch.ins = ins;
     }
 
     /// Evaluates `scratch.order` (last to first). `careful`: saturate each node's overflow and
@@ -449,7 +459,7 @@ impl Graph {
         fp: &Footprint,
         point: bool,
         tc: &Filtered,
-        ins: &mut [Filtered; nodes::MAX_INPUTS],
+        ins: &mut [Filtered],
         scratch: &mut EvalScratch,
         careful: bool,
     ) {
