@@ -561,6 +561,7 @@ pub(super) fn axis_terms<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: 
 
 /// Filtered Perlin noise for up to 4 hash selections at once: per channel (value, ∂/∂x, ∂/∂y).
 /// `s` are the per-axis spreads, each in [1e-4, [`PERLIN_SIGMA_EXACT`]].
+#[cfg(test)]
 fn perlin_exact(p: DVec2, s: DVec2, sels: &[HashSel], out: &mut [(f64, f64, f64); 4], work: &mut crate::eval::Work) {
     perlin_exact_n::<MAX_AXIS, true>(p, s, PERLIN_TAIL, sels, out, work)
 }

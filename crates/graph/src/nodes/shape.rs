@@ -603,8 +603,9 @@ impl Tiled {
     /// comes from (65 536 point evaluations) would otherwise be paid by every evaluation at a
     /// footprint that covers many tiles.
     fn global(&self) -> f64 {
+        type Memo = [Option<((u8, u64), f64)>; 4];
         thread_local! {
-            static MEMO: std::cell::Cell<[Option<((u8, u64), f64)>; 4]> = const { std::cell::Cell::new([None; 4]) };
+            static MEMO: std::cell::Cell<Memo> = const { std::cell::Cell::new([None; 4]) };
         }
         let key = self.key();
         let mut memo = MEMO.get();
