@@ -81,18 +81,13 @@ pub struct EvalScratch {
     values: Vec<Filtered>,
     needed: Vec<bool>,
     order: Vec<NodeId>,
-    evaluations: Vec<u64>,
-    lookups: Vec<u64>,
-    /// Sampled timings: nanoseconds and count of the timed evaluations per node.
-    timed_ns: Vec<u64>,
-    timed: Vec<u64>,
+    /// Evaluations, lookups, sampled timings, non-finite origins and work since creation or the
+    /// last reset: the same record that merged statistics are.
+    stats: EvalStats,
     /// Profiling: sampled timings per (node, bin), `bins` per node; empty when off.
     binned: BinnedTimings,
-    work: Work,
     /// Per-node counting and sampled timing on (the default); off only to measure their cost.
     instrumented: bool,
-    /// Per node: evaluations where this node was the first to give a value that is not finite.
-    nonfinite: Vec<u64>,
     /// The origin of the most recent evaluation that went non-finite, until taken.
     latest_nonfinite: Option<NonFinite>,
     /// Input slots of the node being evaluated ([`nodes::MAX_INPUTS`] of them).
@@ -221,14 +216,16 @@ impl EvalScratch {
             values: vec![Filtered::zero(ValueType::Float); n],
             needed: vec![false; n],
             order: Vec::with_capacity(n),
-            evaluations: vec![0; n],
-            lookups: vec![0; n],
-            timed_ns: vec![0; n],
-            timed: vec![0; n],
+            stats: EvalStats {
+                evaluations: vec![0; n],
+                lookups: vec![0; n],
+                timed_ns: vec![0; n],
+                timed: vec![0; n],
+                nonfinite: vec![0; n],
+                work: Work::default(),
+            },
             binned: BinnedTimings { period: TIMING_PERIOD, ..BinnedTimings::default() },
-            work: Work::default(),
             instrumented: true,
-            nonfinite: vec![0; n],
             latest_nonfinite: None,
             ins: vec![Filtered::zero(ValueType::Float); nodes::MAX_INPUTS],
         }
@@ -264,22 +261,22 @@ impl EvalScratch {
 
     /// Evaluations per node since creation or the last reset.
     pub fn evaluations(&self) -> &[u64] {
-        &self.evaluations
+        &self.stats.evaluations
     }
 
     /// Override answers per node.
     pub fn lookups(&self) -> &[u64] {
-        &self.lookups
+        &self.stats.lookups
     }
 
     /// Work counters.
     pub fn work(&self) -> Work {
-        self.work
+        self.stats.work
     }
 
     /// Per node: the evaluations in which it was the first node to give a non-finite value.
     pub fn nonfinite(&self) -> &[u64] {
-        &self.nonfinite
+        &self.stats.nonfinite
     }
 
     /// The origin of the most recent evaluation that went non-finite since the last call, if
@@ -291,23 +288,17 @@ impl EvalScratch {
 
     /// Zeroes the statistics.
     pub fn reset_stats(&mut self) {
-        self.evaluations.fill(0);
-        self.lookups.fill(0);
-        self.timed_ns.fill(0);
-        self.timed.fill(0);
-        self.nonfinite.fill(0);
+        let st = &mut self.stats;
+        for v in [&mut st.evaluations, &mut st.lookups, &mut st.timed_ns, &mut st.timed, &mut st.nonfinite] {
+            v.fill(0);
+        }
+        st.work = Work::default();
         self.latest_nonfinite = None;
-        self.work = Work::default();
     }
 
     /// Adds this scratch's statistics to `stats` (sized on first use).
     pub fn merge_stats_into(&self, stats: &mut EvalStats) {
-        add_into(&mut stats.evaluations, &self.evaluations);
-        add_into(&mut stats.lookups, &self.lookups);
-        add_into(&mut stats.timed_ns, &self.timed_ns);
-        add_into(&mut stats.timed, &self.timed);
-        add_into(&mut stats.nonfinite, &self.nonfinite);
-        stats.work.merge(&self.work);
+        stats.merge(&self.stats);
     }
 }
 
@@ -416,7 +407,7 @@ impl Graph {
                 if direct != Some(id) {
                     if let Some(v) = ov.lookup(id, fp) {
                         scratch.values[i] = v;
-                        scratch.lookups[i] += 1;
+                        scratch.stats.lookups[i] += 1;
                         continue;
                     }
                 }
@@ -487,28 +478,28 @@ impl Graph {
                     nodes::saturate(&mut v);
                     if !poisoned && !is_finite(&v) {
                         poisoned = true;
-                        scratch.nonfinite[i] += 1;
+                        scratch.stats.nonfinite[i] += 1;
                         scratch.latest_nonfinite = Some(NonFinite { node: id, uv: fp.uv, sigma: major_sigma(fp.cov) });
                     }
                 }
                 scratch.values[i] = v;
                 continue;
             }
-            let timed = scratch.instrumented && scratch.evaluations[i].is_multiple_of(scratch.binned.period);
+            let timed = scratch.instrumented && scratch.stats.evaluations[i].is_multiple_of(scratch.binned.period);
             let start = if timed { Some(std::time::Instant::now()) } else { None };
-            let mut ctx = Ctx { fp, point, work: &mut scratch.work };
+            let mut ctx = Ctx { fp, point, work: &mut scratch.stats.work };
             scratch.values[i] = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
             if let Some(start) = start {
                 let ns = start.elapsed().as_nanos() as u64;
-                scratch.timed_ns[i] += ns;
-                scratch.timed[i] += 1;
+                scratch.stats.timed_ns[i] += ns;
+                scratch.stats.timed[i] += 1;
                 let b = &mut scratch.binned;
                 if b.bins > 0 {
                     b.ns[i * b.bins + b.current] += ns;
                     b.count[i * b.bins + b.current] += 1;
                 }
             }
-            scratch.evaluations[i] += scratch.instrumented as u64;
+            scratch.stats.evaluations[i] += scratch.instrumented as u64;
         }
     }
 

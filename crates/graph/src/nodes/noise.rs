@@ -532,12 +532,10 @@ pub(super) fn kernel_expectations(d: f64, s: f64) -> [f64; 8] {
     // Cell [-1, 0) in y = x + 1, cell [0, 1) in y = x.
     let below = unit_moments(d + 1.0, s, &gaussian::TailMoments::between(&t0, &t1));
     let above = unit_moments(d, s, &gaussian::TailMoments::between(&t1, &t2));
-    let wn = poly(&[1.0, 0.0, 0.0, 10.0, 15.0, 6.0]);
-    let wp = poly(&[1.0, 0.0, 0.0, -10.0, 15.0, -6.0]);
-    let x = poly(&[0.0, 1.0]);
+    let k = kernel();
     let up = |p: &Poly| gaussian::poly_shift_scale(p, -1.0, 1.0);
     let mut out = [0.0; 8];
-    for (base, (n, p)) in [(0, (wn, wp)), (4, (poly_mul(&x, &wn), poly_mul(&x, &wp)))] {
+    for (base, (n, p)) in [(0, (k.w[0], k.w[1])), (4, (k.dw[0], k.dw[1]))] {
         let (mut n, mut p) = (n, p);
         for k in 0..4 {
             out[base + k] = dot(&up(&n), &below) + dot(&p, &above);
