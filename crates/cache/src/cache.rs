@@ -683,6 +683,41 @@ mod tests {
         }
     }
 
+    /// Half-float tiles clamp values beyond ±65504 instead of storing infinities (a bilinear
+    /// tap weighs its four texels, and 0 × ∞ is NaN), and count them; NaN is stored as NaN.
+    #[test]
+    fn half_floats_saturate_and_count_instead_of_overflowing() {
+        let mut c = TileCache::new(CacheConfig::default()).unwrap();
+        let id = c.add_texture(desc(3, TexelFormat::F16)).unwrap();
+        // Channel 0 grows past the half range across the tile, channel 1 is far beyond it
+        // (negative), channel 2 stays in range.
+        let fill = |r: TexelRequest| [65000.0 + 100.0 * r.texel[0] as f32, -1e30, 1.5];
+        let fine = Mat2::from_diagonal(Vec2::splat(1e-6));
+        for k in 0..32 {
+            let uv = Vec2::new(k as f32 * 0.05, 0.02);
+            let v = c.lookup(id, uv, fine, Filter::TRILINEAR, &fill);
+            assert!(v.iter().all(|x| x.is_finite()), "uv {uv}: {v:?}");
+            assert!(v[0] <= 65504.0 && v[0] > 64000.0, "{v:?}");
+            assert_eq!(v[1], -65504.0);
+            assert_eq!(v[2], 1.5);
+        }
+        let total = c.stats().total();
+        assert!(total.texels_filled > 0);
+        // Channel 1 saturates at every texel; channel 0 wherever 65000 + 100 x > 65504.
+        assert!(total.texels_saturated > total.texels_filled, "{total:?}");
+        assert!(total.texels_saturated < 2 * total.texels_filled, "{total:?}");
+        // F32 textures store what they are given.
+        let mut c = TileCache::new(CacheConfig::default()).unwrap();
+        let id = c.add_texture(desc(1, TexelFormat::F32)).unwrap();
+        let v = c.lookup(id, Vec2::new(0.3, 0.3), fine, Filter::TRILINEAR, &|_| [1e30, 0.0, 0.0]);
+        assert_eq!(v[0], 1e30);
+        assert_eq!(c.stats().total().texels_saturated, 0);
+        // NaN stays NaN (the fill that made it is where it is reported).
+        let mut c = TileCache::new(CacheConfig::default()).unwrap();
+        let id = c.add_texture(desc(1, TexelFormat::F16)).unwrap();
+        let v = c.lookup(id, Vec2::new(0.3, 0.3), fine, Filter::TRILINEAR, &|_| [f32::NAN, 0.0, 0.0]);
+        assert!(v[0].is_nan());
+    }
     /// Bilinear interpolation reproduces an affine function, across tile borders and at negative
     /// tile coordinates, and hits texel values exactly at texel centres.
     #[test]

@@ -75,7 +75,9 @@ pub const DEFAULT_TILE_SIZE: u32 = 16;
 pub enum TexelFormat {
     /// 32-bit float per channel.
     F32,
-    /// 16-bit float per channel (`half::f16`); values are rounded to nearest on fill.
+    /// 16-bit float per channel (`half::f16`); values are rounded to nearest on fill, and
+    /// magnitudes beyond 65504 (the largest finite half) are stored as ±65504 and counted in
+    /// [`LevelStats::texels_saturated`].
     F16,
 }
 

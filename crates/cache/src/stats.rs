@@ -30,6 +30,9 @@ pub struct LevelStats {
     pub texels_filled: u64,
     /// Texels evaluated directly (four per direct request).
     pub texels_direct: u64,
+    /// Channel values filled into half-float tiles that lay beyond ±65504 and were stored
+    /// clamped to it (a value's magnitude, not its detail, is lost; zero for `F32` textures).
+    pub texels_saturated: u64,
     /// Tiles evicted.
     pub evictions: u64,
     /// Fills of tiles that had been evicted before (the cache remembers up to 2²⁰ evicted keys;
@@ -51,6 +54,7 @@ impl std::ops::AddAssign<&LevelStats> for LevelStats {
         self.direct += o.direct;
         self.texels_filled += o.texels_filled;
         self.texels_direct += o.texels_direct;
+        self.texels_saturated += o.texels_saturated;
         self.evictions += o.evictions;
         self.refills += o.refills;
         self.resident_bytes += o.resident_bytes;
@@ -175,6 +179,7 @@ pub(crate) struct LevelCounters {
     pub waits: AtomicU64,
     pub direct: AtomicU64,
     pub texels_filled: AtomicU64,
+    pub texels_saturated: AtomicU64,
     pub evictions: AtomicU64,
     pub refills: AtomicU64,
     resident: AtomicU64,
@@ -285,6 +290,7 @@ impl TextureCounters {
                     direct,
                     texels_filled: c.texels_filled.load(Relaxed),
                     texels_direct: 4 * direct,
+                    texels_saturated: c.texels_saturated.load(Relaxed),
                     evictions: c.evictions.load(Relaxed),
                     refills: c.refills.load(Relaxed),
                     resident_bytes: c.resident.load(Relaxed),

@@ -169,7 +169,19 @@ impl Tile {
         };
         match &mut tile.texels {
             Texels::F32(v) => fill_rows(v, side, ch, raw),
-            Texels::F16(v) => fill_rows(v, side, ch, |x, y| raw(x, y).map(f16::from_f32)),
+            Texels::F16(v) => {
+                let mut saturated = 0u64;
+                fill_rows(v, side, ch, |x, y| {
+                    raw(x, y).map(|c| {
+                        let (h, sat) = to_f16(c);
+                        saturated += u64::from(sat);
+                        h
+                    })
+                });
+                if saturated > 0 {
+                    tile.counters.level(key.level).texels_saturated.fetch_add(saturated, Relaxed);
+                }
+            }
         }
         tile
     }
@@ -299,6 +311,21 @@ pub(crate) fn request(tex: TextureId, level: u8, ij: [i64; 2], density: f64) -> 
     }
 }
 
+/// The largest finite half float.
+pub(crate) const F16_MAX: f32 = 65504.0;
+
+/// `v` rounded to a half float, saturating at ±[`F16_MAX`] (a finite value never becomes an
+/// infinity, whose bilinear taps would read as NaN), and whether it saturated. NaN stays NaN:
+/// the fill that produced it reports it.
+#[inline]
+pub(crate) fn to_f16(v: f32) -> (f16, bool) {
+    if v.abs() <= F16_MAX || v.is_nan() {
+        (f16::from_f32(v), false)
+    } else {
+        (f16::from_f32(v.clamp(-F16_MAX, F16_MAX)), true)
+    }
+}
+
 /// The fill's answer for texel `ij`, unrounded.
 #[inline]
 fn raw_value<F>(tex: TextureId, level: u8, ij: [i64; 2], density: f64, fill: &F) -> Texel
@@ -327,7 +354,7 @@ where
     for c in 0..usize::from(desc.channels) {
         t[c] = match desc.format {
             TexelFormat::F32 => v[c],
-            TexelFormat::F16 => f16::from_f32(v[c]).to_f32(),
+            TexelFormat::F16 => to_f16(v[c]).0.to_f32(),
         };
     }
     t

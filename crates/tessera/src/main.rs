@@ -282,6 +282,13 @@ fn run_render(args: RenderArgs) -> Result<()> {
                 st.peak_bytes as f64 / 1048576.0,
                 st.budget_bytes as f64 / 1048576.0
             );
+            if t.texels_saturated > 0 {
+                // Usually texels of coarse tiles far outside the uv range the scene reads.
+                eprintln!(
+                    "tile cache: {} channel values beyond the half-float range were stored as ±65504",
+                    t.texels_saturated
+                );
+            }
         }
         if let Some(a) = &auto {
             eprintln!(
@@ -342,6 +349,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
                     "tile_misses": t.misses,
                     "tiles_filled": t.fills,
                     "texels_filled": t.texels_filled,
+                    "texels_saturated": t.texels_saturated,
                     "evictions": t.evictions,
                     "refills": t.refills,
                     "nodes": cache_nodes_json(nc, &scene, &st),
@@ -386,6 +394,7 @@ fn cache_nodes_json(nc: &NodeCache, scene: &Scene, st: &cache::CacheStats) -> se
                         "misses": l.misses,
                         "fills": l.fills,
                         "texels_filled": l.texels_filled,
+                        "texels_saturated": l.texels_saturated,
                         "evictions": l.evictions,
                         "refills": l.refills,
                         "peak_bytes": l.peak_bytes,
