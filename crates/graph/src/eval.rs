@@ -198,6 +198,15 @@ impl EvalStats {
         self.work.merge(&o.work);
     }
 
+    /// Adds per-graph statistics `from` to `into` graph by graph (growing `into` to as many
+    /// graphs as `from` has).
+    pub fn merge_all(into: &mut Vec<EvalStats>, from: &[EvalStats]) {
+        into.resize(from.len().max(into.len()), EvalStats::default());
+        for (a, b) in into.iter_mut().zip(from) {
+            a.merge(b);
+        }
+    }
+
     /// Estimated seconds spent evaluating node `i`: its evaluations times the mean of its timed
     /// ones.
     pub fn estimated_seconds(&self, i: usize) -> f64 {

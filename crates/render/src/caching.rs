@@ -11,9 +11,12 @@
 //! constant over the footprint. Lookups finer than level 0 evaluate the node directly.
 
 use crate::error::{Error, Result};
-use crate::shading::SceneGraph;
+use crate::integrator::{render_with, RenderOutput, RenderSettings};
+use crate::material::{MaterialGraph, SceneGraph};
+use crate::scene::Scene;
+use crate::shading::{Direct, GraphSource};
 use cache::{CacheConfig, CacheStats, Filter, TexelFormat, TextureDesc, TextureId, TileCache};
-use graph::{EvalScratch, Filtered, Footprint, Graph, Moments, NodeId, NodeOverride, Source, ValueType};
+use graph::{EvalScratch, EvalStats, Filtered, Footprint, Graph, Moments, NodeId, NodeOverride, Source, ValueType};
 use std::cell::RefCell;
 use std::str::FromStr;
 
@@ -22,6 +25,26 @@ use std::str::FromStr;
 pub const LEVEL0_TEXELS_PER_UV: f32 = 16384.0;
 /// Coarsest level (texels 2^6 uv units wide).
 pub const MAX_LEVEL: u8 = 20;
+
+/// The virtual texture a cached node of `channels` channels gets (except in bakes): half floats
+/// at [`LEVEL0_TEXELS_PER_UV`] down to [`MAX_LEVEL`]. The profiler taps the same layout.
+pub fn node_texture(channels: u8) -> TextureDesc {
+    TextureDesc { channels, format: TexelFormat::F16, texels_per_uv: LEVEL0_TEXELS_PER_UV, max_level: MAX_LEVEL }
+}
+
+/// Renders `scene`, reading the nodes `cache` holds from its tiles (every node evaluated on
+/// every request without one); `progress` is called with the pixels each image bucket finished.
+pub fn render_cached(
+    scene: &Scene,
+    settings: RenderSettings,
+    cache: Option<&NodeCache>,
+    progress: &(dyn Fn(u64) + Sync),
+) -> RenderOutput {
+    match cache {
+        Some(nc) => render_with(scene, settings, &|| CacheAccess::new(nc, &scene.graphs), progress),
+        None => render_with(scene, settings, &|| Direct, progress),
+    }
+}
 
 /// Which nodes to cache (`--strategy`).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -166,7 +189,7 @@ fn union(r: Option<UvRect>, lo: glam::Vec2, hi: glam::Vec2) -> Option<UvRect> {
 }
 
 /// The uv rectangle each material's shapes cover.
-fn material_uv_bounds(scene: &crate::scene::Scene) -> Vec<Option<UvRect>> {
+fn material_uv_bounds(scene: &Scene) -> Vec<Option<UvRect>> {
     use crate::geometry::ShapeGeometry;
     let mut b: Vec<Option<UvRect>> = vec![None; scene.materials.len()];
     for shape in &scene.shapes {
@@ -191,7 +214,7 @@ fn material_uv_bounds(scene: &crate::scene::Scene) -> Vec<Option<UvRect>> {
 impl NodeCache {
     /// Builds the cache for `strategy` within `budget_bytes`; `None` for [`Strategy::None`].
     /// For [`Strategy::Bake`] the textures are filled before this returns.
-    pub fn new(scene: &crate::scene::Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
+    pub fn new(scene: &Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
         let (graphs, materials) = (&scene.graphs[..], &scene.materials[..]);
         let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
         let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
@@ -327,14 +350,17 @@ impl NodeCache {
                     continue;
                 }
                 let Some(ch) = channels(g.node_type(id)) else { continue };
-                let (texels_per_uv, max_level) = match (bake, rects[gi][id.0 as usize]) {
+                let desc = match (bake, rects[gi][id.0 as usize]) {
                     (Some(res), Some((lo, hi))) => {
                         let extent = (hi - lo).max_element().max(1e-6);
-                        (res as f32 / extent, (res as f32).log2().ceil().clamp(0.0, cache::MAX_LEVEL as f32) as u8)
+                        TextureDesc {
+                            texels_per_uv: res as f32 / extent,
+                            max_level: (res as f32).log2().ceil().clamp(0.0, cache::MAX_LEVEL as f32) as u8,
+                            ..node_texture(ch)
+                        }
                     }
-                    _ => (LEVEL0_TEXELS_PER_UV, MAX_LEVEL),
+                    _ => node_texture(ch),
                 };
-                let desc = TextureDesc { channels: ch, format: TexelFormat::F16, texels_per_uv, max_level };
                 per_node[id.0 as usize] = Some(cache.add_texture(desc).map_err(|e| Error::plain(e.to_string()))?);
             }
             textures.push(per_node);
@@ -354,7 +380,7 @@ impl NodeCache {
     /// The cache for a plan (as [`Strategy::Plan`] reads from a file); `None` when the plan
     /// caches nothing.
     pub fn from_plan(
-        scene: &crate::scene::Scene,
+        scene: &Scene,
         plan: &plan::PlanFile,
         budget_bytes: usize,
     ) -> Result<Option<NodeCache>> {
@@ -455,15 +481,6 @@ impl<'a> CacheAccess<'a> {
         CacheAccess { cache, graphs, pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()) }
     }
 
-    /// Adds the statistics of every fill evaluation so far to `stats` (one entry per graph).
-    pub(crate) fn merge_fill_stats_into(&self, stats: &mut [graph::EvalStats]) {
-        for (scratches, out) in self.pool.borrow().iter().zip(stats.iter_mut()) {
-            for s in scratches {
-                s.merge_stats_into(out);
-            }
-        }
-    }
-
     /// The override for graph `graph`.
     pub fn for_graph(&self, graph: u32) -> GraphOverride<'_, 'a> {
         GraphOverride { access: self, graph }
@@ -475,6 +492,30 @@ impl<'a> CacheAccess<'a> {
         let f = g.eval_node_direct(node, fp, &mut scratch, &self.for_graph(graph));
         self.pool.borrow_mut()[graph as usize].push(scratch);
         f
+    }
+}
+
+/// Requests evaluate their plans with cached nodes answered from the tiles.
+impl GraphSource for CacheAccess<'_> {
+    #[inline]
+    fn evaluate(
+        &mut self,
+        g: &Graph,
+        request: &MaterialGraph,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        out: &mut [Filtered],
+    ) {
+        g.eval(&request.plan, fp, scratch, &self.for_graph(request.graph), out);
+    }
+
+    /// The statistics of every tile fill's evaluations so far.
+    fn merge_stats_into(&self, stats: &mut [EvalStats]) {
+        for (scratches, out) in self.pool.borrow().iter().zip(stats.iter_mut()) {
+            for s in scratches {
+                s.merge_stats_into(out);
+            }
+        }
     }
 }
 

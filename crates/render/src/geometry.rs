@@ -110,6 +110,44 @@ pub struct SurfaceInteraction {
     pub shape: u32,
 }
 
+impl SurfaceInteraction {
+    /// The hit as the footprint crate sees a path vertex: position, shading frame (normal,
+    /// tangent, bitangent), ∂p/∂u, ∂p/∂v, ∂n/∂u, ∂n/∂v and uv, in double precision.
+    pub fn footprint_vertex(&self) -> footprint::Vertex {
+        footprint::Vertex {
+            p: self.p.as_dvec3(),
+            n: self.sh.n.as_dvec3(),
+            t: self.sh.s.as_dvec3(),
+            b: self.sh.t.as_dvec3(),
+            dpdu: self.dpdu.as_dvec3(),
+            dpdv: self.dpdv.as_dvec3(),
+            dndu: self.dndu.as_dvec3(),
+            dndv: self.dndv.as_dvec3(),
+            uv: glam::DVec2::new(self.uv.x as f64, self.uv.y as f64),
+        }
+    }
+
+    /// The footprint a material's graphs are evaluated over at this hit: its uv centre and uv
+    /// covariance `cov`, and the hit's geometry for nodes that read more than uv (`position`,
+    /// `normal`, `tangent`, `bitangent`, 3D noises): world position, shading normal, the shading
+    /// frame's tangent (∂p/∂u made orthogonal to the normal) and bitangent, ∂p/∂u, ∂p/∂v (so the
+    /// position's footprint is `J Σ Jᵀ`) and ∂n/∂u, ∂n/∂v. World space is also MaterialX's
+    /// object space here: shapes are transformed to world space at load.
+    pub fn graph_footprint(&self, cov: glam::Mat2) -> graph::Footprint {
+        let geom = graph::Geometry {
+            p: self.p,
+            n: self.sh.n,
+            t: self.sh.s,
+            b: self.sh.t,
+            dpdu: self.dpdu,
+            dpdv: self.dpdv,
+            dndu: self.dndu,
+            dndv: self.dndv,
+        };
+        graph::Footprint::with_geometry(self.uv, cov, geom)
+    }
+}
+
 /// What kind of primitive a BVH leaf holds (kept beside the reference so that a triangle test
 /// never has to load its shape).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -583,7 +621,7 @@ mod tests {
 
     /// Mitsuba's rectangle: [−1, 1]² at z = 0, uv = ((x+1)/2, (y+1)/2).
     fn quad() -> TriangleMesh {
-        crate::loader::rectangle_mesh()
+        crate::mesh::rectangle_mesh()
     }
 
     fn mesh_shape(mesh: TriangleMesh) -> Shape {

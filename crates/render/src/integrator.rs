@@ -9,18 +9,64 @@ use crate::camera::CameraRay;
 use crate::film::Image;
 use crate::geometry::{interaction, Ray, SurfaceInteraction};
 use crate::math::{max_component, Frame, Spectrum};
-use crate::pathfootprint::{shadow_scatter, vertex_of, FootprintMode, PathFootprint};
+use crate::material::Material;
+use crate::pathfootprint::{shadow_scatter, FootprintMode, PathFootprint};
 use crate::sampling::Rng;
 use crate::scene::Scene;
-use crate::shading::{Material, ShadeScratch};
+use crate::shading::{Direct, GraphSource, NonFiniteSample, TextureEvaluator, NONFINITE_KEPT};
 use crate::texture::ShadeContext;
 use footprint::Vertex;
 use glam::{DMat2, DVec2, Mat2, Vec2, Vec3};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 
-/// Side of the square image tiles handed to threads.
-pub const TILE: u32 = 16;
+/// Side of the square image buckets handed to threads.
+pub const BUCKET: u32 = 16;
+
+/// A rectangle of the image rendered by one thread: pixels `x0..x1` × `y0..y1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Bucket {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// One past the last column.
+    pub x1: u32,
+    /// One past the last row.
+    pub y1: u32,
+}
+
+impl Bucket {
+    /// The bucket's pixels, row by row.
+    pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+
+    /// Number of pixels.
+    pub fn len(self) -> usize {
+        ((self.x1 - self.x0) * (self.y1 - self.y0)) as usize
+    }
+
+    /// Whether the bucket has no pixels.
+    pub fn is_empty(self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Renders the buckets of a `w` × `h` image in parallel on the current rayon pool, `work`
+/// making each bucket's result; the results come back in row-major bucket order, whatever the
+/// thread count. Rendering and profiling both drive their buckets through this.
+pub fn for_each_bucket<T: Send>(w: u32, h: u32, work: &(dyn Fn(Bucket) -> T + Sync)) -> Vec<(Bucket, T)> {
+    let buckets: Vec<Bucket> = (0..h.div_ceil(BUCKET))
+        .flat_map(|by| {
+            (0..w.div_ceil(BUCKET)).map(move |bx| {
+                let (x0, y0) = (bx * BUCKET, by * BUCKET);
+                Bucket { x0, y0, x1: (x0 + BUCKET).min(w), y1: (y0 + BUCKET).min(h) }
+            })
+        })
+        .collect();
+    buckets.par_iter().map(|&b| (b, work(b))).collect()
+}
 
 /// Counts gathered while rendering.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -63,13 +109,12 @@ pub struct RenderOutput {
     pub counts: RenderCounts,
     /// Per scene graph: node evaluations and work counters.
     pub graph_stats: Vec<graph::EvalStats>,
-    /// The first samples whose radiance was not finite (at most
-    /// [`crate::shading::NONFINITE_KEPT`], ordered by pixel row, column and sample), with where
-    /// each came from.
-    pub nonfinite: Vec<crate::shading::NonFiniteSample>,
+    /// The first samples whose radiance was not finite (at most [`NONFINITE_KEPT`], ordered by
+    /// pixel row, column and sample), with where each came from.
+    pub nonfinite: Vec<NonFiniteSample>,
     /// The first samples on whose path a procedural texture value went non-finite (whether or
     /// not their radiance did), in the same order, with where.
-    pub graph_nonfinite: Vec<crate::shading::NonFiniteSample>,
+    pub graph_nonfinite: Vec<NonFiniteSample>,
     /// Wall-clock time of the rendering phase.
     pub time: Duration,
 }
@@ -209,65 +254,61 @@ pub trait PathObserver {
 pub struct NoObserver;
 impl PathObserver for NoObserver {}
 
-/// A tile's pixels (radiance, footprint AOV), counters and graph statistics.
-type TileResult = (
-    Vec<(Spectrum, Spectrum)>,
-    RenderCounts,
-    Vec<graph::EvalStats>,
-    Vec<crate::shading::NonFiniteSample>,
-    Vec<crate::shading::NonFiniteSample>,
-);
-
-/// Renders `scene`; `progress` is called with the number of pixels finished by each tile.
-pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
-    render_cached(scene, settings, None, progress)
+/// A bucket's pixels (radiance, footprint AOV), counters, graph statistics and non-finite
+/// samples.
+struct BucketResult {
+    pixels: Vec<(Spectrum, Spectrum)>,
+    counts: RenderCounts,
+    stats: Vec<graph::EvalStats>,
+    nonfinite: Vec<NonFiniteSample>,
+    graph_nonfinite: Vec<NonFiniteSample>,
 }
 
-/// [`render`] with graph nodes read through `cache` (see [`crate::caching`]).
-pub fn render_cached(
+/// Renders `scene` with every graph node evaluated on every request; `progress` is called with
+/// the number of pixels each image bucket finished.
+pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
+    render_with(scene, settings, &|| Direct, progress)
+}
+
+/// Renders `scene` with graph requests served by the sources `source` makes (one per image
+/// bucket): [`Direct`], or a cache's (`crate::caching::render_cached`).
+pub fn render_with<S: GraphSource>(
     scene: &Scene,
     settings: RenderSettings,
-    cache: Option<&crate::caching::NodeCache>,
+    source: &(dyn Fn() -> S + Sync),
     progress: &(dyn Fn(u64) + Sync),
 ) -> RenderOutput {
     let start = Instant::now();
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let tiles_x = w.div_ceil(TILE);
-    let tiles_y = h.div_ceil(TILE);
-    let tiles: Vec<(u32, u32)> = (0..tiles_y).flat_map(|ty| (0..tiles_x).map(move |tx| (tx, ty))).collect();
-    let results: Vec<TileResult> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
-            let (x0, y0) = (tx * TILE, ty * TILE);
-            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let mut counts = RenderCounts::default();
-            let mut shade = ShadeScratch::with_cache(&scene.graphs, &scene.materials, cache);
-            let mut px = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    px.push(render_pixel_aov(scene, settings, x, y, &mut counts, &mut shade));
-                }
-            }
-            progress(px.len() as u64);
-            let mut stats = Vec::new();
-            shade.merge_stats_into(&mut stats);
-            (px, counts, stats, std::mem::take(&mut shade.nonfinite), std::mem::take(&mut shade.graph_nonfinite))
-        })
-        .collect();
+    let results = for_each_bucket(w, h, &|b| {
+        let mut counts = RenderCounts::default();
+        let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, source());
+        let mut pixels = Vec::with_capacity(b.len());
+        for (x, y) in b.pixels() {
+            pixels.push(render_pixel_aov(scene, settings, x, y, &mut counts, &mut textures));
+        }
+        progress(pixels.len() as u64);
+        let mut stats = Vec::new();
+        textures.merge_stats_into(&mut stats);
+        BucketResult {
+            pixels,
+            counts,
+            stats,
+            nonfinite: std::mem::take(&mut textures.nonfinite),
+            graph_nonfinite: std::mem::take(&mut textures.graph_nonfinite),
+        }
+    });
     let mut image = Image::new(w, h);
     let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
     let mut counts = RenderCounts::default();
     let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
     let (mut nonfinite, mut graph_nonfinite) = (Vec::new(), Vec::new());
-    for (&(tx, ty), (px, c, gs, nf, gnf)) in tiles.iter().zip(&results) {
-        counts.add(c);
-        nonfinite.extend_from_slice(nf);
-        graph_nonfinite.extend_from_slice(gnf);
-        merge_graph_stats(&mut graph_stats, gs);
-        let (x0, y0) = (tx * TILE, ty * TILE);
-        let tw = (x0 + TILE).min(w) - x0;
-        for (i, p) in px.iter().enumerate() {
-            let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
+    for (b, r) in &results {
+        counts.add(&r.counts);
+        nonfinite.extend_from_slice(&r.nonfinite);
+        graph_nonfinite.extend_from_slice(&r.graph_nonfinite);
+        graph::EvalStats::merge_all(&mut graph_stats, &r.stats);
+        for ((x, y), p) in b.pixels().zip(&r.pixels) {
             image.pixels[(y * w + x) as usize] = p.0;
             if let Some(a) = &mut aov {
                 a.pixels[(y * w + x) as usize] = p.1;
@@ -275,17 +316,10 @@ pub fn render_cached(
         }
     }
     for list in [&mut nonfinite, &mut graph_nonfinite] {
-        list.sort_by_key(|n: &crate::shading::NonFiniteSample| (n.y, n.x, n.sample));
-        list.truncate(crate::shading::NONFINITE_KEPT);
+        list.sort_by_key(|n: &NonFiniteSample| (n.y, n.x, n.sample));
+        list.truncate(NONFINITE_KEPT);
     }
     RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, graph_nonfinite, time: start.elapsed() }
-}
-
-fn merge_graph_stats(into: &mut Vec<graph::EvalStats>, from: &[graph::EvalStats]) {
-    into.resize(from.len().max(into.len()), graph::EvalStats::default());
-    for (a, b) in into.iter_mut().zip(from) {
-        a.merge(b);
-    }
 }
 
 /// Accumulates per-bounce LODs for the footprint AOV.
@@ -307,19 +341,20 @@ impl PathObserver for LodObserver {
 }
 
 /// A pixel's radiance and, when asked for, its footprint AOV value.
-fn render_pixel_aov(
+fn render_pixel_aov<S: GraphSource>(
     scene: &Scene,
     settings: RenderSettings,
     x: u32,
     y: u32,
     counts: &mut RenderCounts,
-    shade: &mut ShadeScratch,
+    textures: &mut TextureEvaluator<S>,
 ) -> (Spectrum, Spectrum) {
+    let spp = settings.spp;
     let Some(density) = settings.footprint_aov_density else {
-        return (render_pixel_with(scene, settings, x, y, counts, shade, &mut NoObserver), Spectrum::ZERO);
+        return (render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut NoObserver), Spectrum::ZERO);
     };
     let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
-    let l = render_pixel_with(scene, settings, x, y, counts, shade, &mut obs);
+    let l = render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut obs);
     let lods: [f32; AOV_BOUNCES] =
         std::array::from_fn(
             |k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX },
@@ -340,31 +375,35 @@ pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (Camer
     (cam, Rng::for_sample(seed, pixel_index, u64::from(s)))
 }
 
-/// Mean radiance of one pixel over `settings.spp` samples, reporting every path to `obs`.
-pub fn render_pixel_with<O: PathObserver>(
+/// Mean radiance of one pixel over its first `samples` samples (a render takes
+/// `settings.spp`), reporting every path to `obs`; non-finite samples are left out of the mean
+/// and recorded in `textures`.
+#[allow(clippy::too_many_arguments)]
+pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
     scene: &Scene,
     settings: RenderSettings,
     x: u32,
     y: u32,
+    samples: u32,
     counts: &mut RenderCounts,
-    shade: &mut ShadeScratch,
+    textures: &mut TextureEvaluator<S>,
     obs: &mut O,
 ) -> Spectrum {
     let mut sum = Spectrum::ZERO;
-    for s in 0..settings.spp {
+    for s in 0..samples {
         let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
-        shade.begin_sample();
-        let l = radiance(scene, settings, &cam, &mut rng, counts, shade, obs);
+        textures.begin_sample(s);
+        let l = radiance(scene, settings, &cam, &mut rng, counts, textures, obs);
         counts.samples += 1;
         if l.is_finite() {
             sum += l;
         } else {
             counts.nonfinite_samples += 1;
-            shade.record_nonfinite(x, y, s);
+            textures.record_nonfinite(x, y, s);
         }
-        shade.end_sample(x, y, s);
+        textures.end_sample(x, y, s);
     }
-    sum / settings.spp.max(1) as f32
+    sum / samples.max(1) as f32
 }
 
 /// Offsets a ray origin off the surface along the geometric normal, on the side of `d`.
@@ -415,10 +454,10 @@ fn past(si: &SurfaceInteraction, t: f32) -> f32 {
 /// tangent-plane covariance at `vertex`) gives there, centred `shift` away from the hit; a point
 /// without a vertex, the means with `--free-textures`, nothing for a material without graphs.
 #[allow(clippy::too_many_arguments)]
-fn material_outputs<'a>(
+fn material_outputs<'a, S: GraphSource>(
     scene: &'a Scene,
     settings: &RenderSettings,
-    shade: &'a mut ShadeScratch,
+    textures: &'a mut TextureEvaluator<S>,
     material: &'a Material,
     si: &SurfaceInteraction,
     vertex: Option<&Vertex>,
@@ -433,14 +472,14 @@ fn material_outputs<'a>(
         let fp = match vertex {
             Some(v) => {
                 let cov = footprint::uv_covariance(var, v).as_mat2() * settings.filter_scale_squared();
-                let mut fp = crate::shading::footprint_at(si, cov);
+                let mut fp = si.graph_footprint(cov);
                 fp.uv += shift.uv;
                 fp.geom.p += shift.p;
                 fp
             }
-            None => crate::shading::footprint_at(si, Mat2::ZERO),
+            None => si.graph_footprint(Mat2::ZERO),
         };
-        shade.evaluate(&scene.graphs, material, &fp)
+        textures.evaluate(&scene.graphs, material, &fp)
     }
 }
 
@@ -516,10 +555,10 @@ fn shade_bsdf(material: &Material, si: &SurfaceInteraction, ctx: &ShadeContext) 
 /// filtered over the footprint the path would carry there, had its BSDF sampled the light's
 /// direction (`from`: the path's footprint state at the shading point, its vertex and
 /// [`shadow_scatter`]'s record; a point without it).
-fn transmittance(
+fn transmittance<S: GraphSource>(
     scene: &Scene,
     settings: &RenderSettings,
-    shade: &mut ShadeScratch,
+    textures: &mut TextureEvaluator<S>,
     mut shadow: Ray,
     from: Option<(&PathFootprint, &Vertex, &crate::bsdf::BsdfSample)>,
 ) -> Spectrum {
@@ -538,7 +577,7 @@ fn transmittance(
         let si = interaction(&scene.shapes, &shadow, &hit);
         let (vertex, var) = match from {
             Some((fp, cur, bs)) if !material.graphs.is_empty() => {
-                let v = vertex_of(&si);
+                let v = si.footprint_vertex();
                 let mut state = *fp;
                 let var = state.advance(cur, bs, shadow.d, &v);
                 (Some(v), var)
@@ -546,7 +585,7 @@ fn transmittance(
             _ => (None, DMat2::ZERO),
         };
         let outputs =
-            material_outputs(scene, settings, shade, material, &si, vertex.as_ref(), var, CentreShift::default());
+            material_outputs(scene, settings, textures, material, &si, vertex.as_ref(), var, CentreShift::default());
         tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
         if max_component(tr) <= 0.0 {
             return Spectrum::ZERO;
@@ -580,13 +619,13 @@ fn transmittance(
 /// vertex is `p` times the BSDF's (what the mixture samples), both at emitter hits and in
 /// next-event estimation. Emission of a partly transparent emitter is not masked (Mitsuba's
 /// emitters are separate from their shape's BSDF).
-pub fn radiance<O: PathObserver>(
+pub fn radiance<S: GraphSource, O: PathObserver>(
     scene: &Scene,
     settings_r: RenderSettings,
     cam: &CameraRay,
     rng: &mut Rng,
     counts: &mut RenderCounts,
-    shade: &mut ShadeScratch,
+    textures: &mut TextureEvaluator<S>,
     obs: &mut O,
 ) -> Spectrum {
     let settings = scene.integrator;
@@ -612,7 +651,7 @@ pub fn radiance<O: PathObserver>(
     // Surfaces passed straight through since the last scattering vertex.
     let mut passes = 0u32;
     loop {
-        shade.depth = depth;
+        textures.depth = depth;
         counts.rays += 1;
         let hit = scene.accel.intersect(&scene.shapes, &ray);
         let Some(hit) = hit else {
@@ -632,7 +671,7 @@ pub fn radiance<O: PathObserver>(
         let si = interaction(&scene.shapes, &ray, &hit);
         let shape = &scene.shapes[si.shape as usize];
         let material = &scene.materials[shape.material as usize];
-        let vertex = if track { Some(vertex_of(&si)) } else { None };
+        let vertex = if track { Some(si.footprint_vertex()) } else { None };
         // The footprint here, carried from the last scattering vertex (or the camera) along this
         // ray; the path keeps it only if it scatters here.
         let (fp_here, var) = match (&vertex, &prev_vertex, &prev_bs) {
@@ -666,7 +705,7 @@ pub fn radiance<O: PathObserver>(
         let mut scatter_pdf = 1.0f32;
         let mut shaded = None;
         if material.bsdf.is_masked() {
-            let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var, shift);
+            let outputs = material_outputs(scene, &settings_r, textures, material, &si, vertex.as_ref(), var, shift);
             let ctx = ShadeContext { uv: si.uv, outputs };
             let o = material.bsdf.opacity(&ctx);
             let p = (o.x + o.y + o.z) / 3.0;
@@ -697,7 +736,7 @@ pub fn radiance<O: PathObserver>(
             Some(s) => s,
             None => {
                 // Procedural textures are filtered to the vertex's uv footprint (a point without one).
-                let outputs = material_outputs(scene, &settings_r, shade, material, &si, vertex.as_ref(), var, shift);
+                let outputs = material_outputs(scene, &settings_r, textures, material, &si, vertex.as_ref(), var, shift);
                 shade_bsdf(material, &si, &ShadeContext { uv: si.uv, outputs })
             }
         };
@@ -726,7 +765,7 @@ pub fn radiance<O: PathObserver>(
                             _ => None,
                         };
                         let from = toward.as_ref().map(|(v, bs)| (&fp, *v, bs));
-                        let tr = transmittance(scene, &settings_r, shade, shadow, from);
+                        let tr = transmittance(scene, &settings_r, textures, shadow, from);
                         if max_component(tr) > 0.0 {
                             let light_pdf = select_pdf * es.pdf;
                             let w = if es.delta { 1.0 } else { mis(light_pdf, scatter_pdf * bsdf.pdf(wi, wo)) };

@@ -1,10 +1,19 @@
 //! tessera's renderer: scene loading (a Mitsuba 3 XML subset), geometry and BVH, BSDFs,
-//! emitters, the path-tracing integrator and the film.
+//! emitters, materials with procedural textures, the path-tracing integrator and the film.
 //!
 //! A [`scene::Scene`] comes from [`loader::load_file`] (Mitsuba 3 XML, read by [`xml`]); it holds
-//! [`geometry::Shape`]s indexed by a BVH ([`geometry::Accel`]), [`bsdf::BsdfDesc`] materials,
+//! [`geometry::Shape`]s indexed by a BVH ([`geometry::Accel`]), [`material::Material`]s (a
+//! [`bsdf::BsdfDesc`] whose textures may read outputs of the scene's [`material::SceneGraph`]s),
 //! [`emitter::Emitter`]s and a [`camera::Camera`]. [`integrator::render`] turns it into a
-//! [`film::Image`].
+//! [`film::Image`], bucket by bucket ([`integrator::for_each_bucket`]).
+//!
+//! **The seam.** A shading point asks its thread's [`shading::TextureEvaluator`] for a material's
+//! graph outputs at its footprint; the evaluator hands the request to a
+//! [`shading::GraphSource`]: [`shading::Direct`] evaluation, the tile cache's
+//! ([`caching::CacheAccess`], rendered by [`caching::render_cached`]) or the profiler's
+//! ([`profiling::Profiler`], which wraps the direct one). The integrator is generic over the
+//! source and imports neither the cache nor the profiler; they import it. No two modules import
+//! each other, directly or around a circle (a test reads the imports from the source).
 
 // `!(x > 0.0)` is how this crate says "not positive, or NaN": the negation is the point.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -18,6 +27,7 @@ pub mod film;
 pub mod geometry;
 pub mod integrator;
 pub mod loader;
+pub mod material;
 pub mod math;
 pub mod mesh;
 pub mod pathfootprint;
@@ -27,3 +37,6 @@ pub mod scene;
 pub mod shading;
 pub mod texture;
 pub mod xml;
+
+#[cfg(test)]
+mod module_graph;

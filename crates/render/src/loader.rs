@@ -9,9 +9,9 @@ use crate::camera::{Camera, FovAxis, Rfilter};
 use crate::emitter::{Emitter, EnvMap};
 use crate::error::Result;
 use crate::geometry::{mesh_area_distribution, Accel, Shape, ShapeGeometry};
-use crate::mesh::TriangleMesh;
+use crate::mesh::{cube_mesh, rectangle_mesh, TriangleMesh};
 use crate::scene::{PathSettings, Scene};
-use crate::shading::{Material, MaterialGraph, SceneGraph};
+use crate::material::{Material, MaterialGraph, SceneGraph};
 use crate::texture::{Bitmap, Texture, WrapMode};
 use crate::xml::{self, Object};
 use glam::{Affine2, Affine3A, Mat3, Mat4, Vec2, Vec3};
@@ -869,40 +869,3 @@ fn mesh_geometry(obj: &Object, mut mesh: TriangleMesh, to_world: Mat4) -> Result
     Ok(ShapeGeometry::Mesh { mesh, area })
 }
 
-/// Mitsuba's `rectangle`: [−1, 1]² in the xy plane, normal +z, uv = ((x+1)/2, (y+1)/2).
-pub fn rectangle_mesh() -> TriangleMesh {
-    TriangleMesh {
-        positions: vec![
-            Vec3::new(-1.0, -1.0, 0.0),
-            Vec3::new(1.0, -1.0, 0.0),
-            Vec3::new(1.0, 1.0, 0.0),
-            Vec3::new(-1.0, 1.0, 0.0),
-        ],
-        normals: None,
-        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
-        indices: vec![[0, 1, 2], [0, 2, 3]],
-    }
-}
-
-/// Mitsuba's `cube`: [−1, 1]³ with flat faces, outward normals.
-pub fn cube_mesh() -> TriangleMesh {
-    let mut positions = Vec::new();
-    let mut uvs = Vec::new();
-    let mut indices = Vec::new();
-    for axis in 0..3 {
-        for sign in [-1.0f32, 1.0] {
-            let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
-            // Two tangents so that t1 × t2 = n.
-            let t1 = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
-            let t2 = n.cross(t1);
-            let base = positions.len() as u32;
-            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-                positions.push(n + t1 * a + t2 * b);
-                uvs.push(Vec2::new((a + 1.0) * 0.5, (b + 1.0) * 0.5));
-            }
-            indices.push([base, base + 1, base + 2]);
-            indices.push([base, base + 2, base + 3]);
-        }
-    }
-    TriangleMesh { positions, normals: None, uvs: Some(uvs), indices }
-}

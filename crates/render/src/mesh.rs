@@ -1,4 +1,4 @@
-//! Triangle meshes from OBJ and PLY files.
+//! Triangle meshes from OBJ and PLY files, and Mitsuba's built-in `rectangle` and `cube`.
 //!
 //! OBJ goes through the `tobj` crate (`single_index` unifies per-corner `v/vt/vn` indices into
 //! unique vertices, `triangulate` fans polygons); we only add line numbers to its errors. PLY
@@ -440,6 +440,44 @@ pub fn load_ply(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
         }),
         indices,
     })
+}
+
+/// Mitsuba's `rectangle`: [−1, 1]² in the xy plane, normal +z, uv = ((x+1)/2, (y+1)/2).
+pub fn rectangle_mesh() -> TriangleMesh {
+    TriangleMesh {
+        positions: vec![
+            Vec3::new(-1.0, -1.0, 0.0),
+            Vec3::new(1.0, -1.0, 0.0),
+            Vec3::new(1.0, 1.0, 0.0),
+            Vec3::new(-1.0, 1.0, 0.0),
+        ],
+        normals: None,
+        uvs: Some(vec![Vec2::new(0.0, 0.0), Vec2::new(1.0, 0.0), Vec2::new(1.0, 1.0), Vec2::new(0.0, 1.0)]),
+        indices: vec![[0, 1, 2], [0, 2, 3]],
+    }
+}
+
+/// Mitsuba's `cube`: [−1, 1]³ with flat faces, outward normals.
+pub fn cube_mesh() -> TriangleMesh {
+    let mut positions = Vec::new();
+    let mut uvs = Vec::new();
+    let mut indices = Vec::new();
+    for axis in 0..3 {
+        for sign in [-1.0f32, 1.0] {
+            let n = Vec3::from_array(std::array::from_fn(|i| if i == axis { sign } else { 0.0 }));
+            // Two tangents so that t1 × t2 = n.
+            let t1 = Vec3::from_array(std::array::from_fn(|i| if i == (axis + 1) % 3 { 1.0 } else { 0.0 }));
+            let t2 = n.cross(t1);
+            let base = positions.len() as u32;
+            for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                positions.push(n + t1 * a + t2 * b);
+                uvs.push(Vec2::new((a + 1.0) * 0.5, (b + 1.0) * 0.5));
+            }
+            indices.push([base, base + 1, base + 2]);
+            indices.push([base, base + 2, base + 3]);
+        }
+    }
+    TriangleMesh { positions, normals: None, uvs: Some(uvs), indices }
 }
 
 #[cfg(test)]

@@ -9,11 +9,10 @@
 
 use crate::bsdf::{lobe_alpha, Bsdf, BsdfModel, BsdfSample, LobeKind};
 use crate::camera::{Camera, CameraRay};
-use crate::geometry::SurfaceInteraction;
 use footprint::{
     first_vertex_variance, half_vector_variance, FootprintTracker, PbrtDifferentials, RayCone, Scatter, Vertex,
 };
-use glam::{DMat2, DVec2, Vec3};
+use glam::{DMat2, Vec3};
 use std::str::FromStr;
 
 /// Which footprint estimator paths carry (`--footprint`).
@@ -40,21 +39,6 @@ impl FromStr for FootprintMode {
             "none" => FootprintMode::None,
             _ => return Err(format!("unknown footprint estimator '{s}' (expected covariance, raycone, pbrt or none)")),
         })
-    }
-}
-
-/// The footprint crate's view of a surface hit.
-pub fn vertex_of(si: &SurfaceInteraction) -> Vertex {
-    Vertex {
-        p: si.p.as_dvec3(),
-        n: si.sh.n.as_dvec3(),
-        t: si.sh.s.as_dvec3(),
-        b: si.sh.t.as_dvec3(),
-        dpdu: si.dpdu.as_dvec3(),
-        dpdv: si.dpdv.as_dvec3(),
-        dndu: si.dndu.as_dvec3(),
-        dndv: si.dndv.as_dvec3(),
-        uv: DVec2::new(si.uv.x as f64, si.uv.y as f64),
     }
 }
 

@@ -2,11 +2,13 @@
 //! [`plan::Profile`] for the selective-caching model.
 //!
 //! Each shading point's evaluation of a material's graph is one request of that material's
-//! stream. The tap records its level and the tiles a trilinear lookup of a cached node would
-//! read there (the cache crate's [`cache::trilinear_taps`], the same arithmetic the lookup uses,
-//! on the textures [`crate::caching`] would create), with touch counts; the evaluator records
-//! each node's own cost per level from timed evaluations. Nothing is cached while profiling, so
-//! every node of a request's plan is evaluated and timed.
+//! stream. The [`Profiler`], the graph source of a profiling render, records its level and the
+//! tiles a trilinear lookup of a cached node would read there (the cache crate's
+//! [`cache::trilinear_taps`], the same arithmetic the lookup uses, on the textures
+//! [`crate::caching::node_texture`] lays out), with touch counts, then evaluates it [`Direct`]ly;
+//! the evaluator records each node's own cost per level from timed evaluations. Nothing is
+//! cached while profiling, so every node of a request's plan is evaluated and timed. The
+//! profile renders through the integrator's own bucket driver and pixel loop.
 //!
 //! The profile traces a deterministic subset of the image's pixels (`pixel_fraction`) at the
 //! final render's footprints: fewer samples, the same distribution of requests per sample.
@@ -15,17 +17,17 @@ use std::collections::HashMap;
 use std::time::Instant;
 
 use cache::{CacheConfig, Filter, TexelFormat, TexelRequest, TextureDesc, TileCache, TileRef};
-use graph::{EvalPlan, EvalScratch, Filtered, Footprint, Graph, NoOverride, NodeId, Source};
+use graph::{EvalScratch, Filtered, Footprint, Graph, NodeId, Source};
 use plan::profile::{
     CacheGeometry, LevelCost, LevelCount, LevelTiles, MachineCosts, Profile, ProfileGraph, ProfileNode, ProfileRender,
     SceneId, Stream, FINER_THAN_LEVEL0, PROFILE_SCHEMA,
 };
-use rayon::prelude::*;
 
-use crate::caching::{channels, worth_caching, LEVEL0_TEXELS_PER_UV, MAX_LEVEL};
-use crate::integrator::{NoObserver, RenderCounts, RenderSettings, TILE};
+use crate::caching::{channels, node_texture, worth_caching, LEVEL0_TEXELS_PER_UV, MAX_LEVEL};
+use crate::integrator::{for_each_bucket, render_pixel_with, NoObserver, RenderCounts, RenderSettings};
+use crate::material::MaterialGraph;
 use crate::scene::Scene;
-use crate::shading::ShadeScratch;
+use crate::shading::{Direct, GraphSource, TextureEvaluator};
 
 /// Level bins: finer than level 0, then levels `0..=MAX_LEVEL`.
 const BINS: usize = MAX_LEVEL as usize + 2;
@@ -55,9 +57,12 @@ struct StreamTap {
     tiles: HashMap<TileRef, (u64, u64)>,
 }
 
-/// The per-thread recorder a [`ShadeScratch`] carries while profiling.
+/// The graph source of a profiling render (one per image bucket): it records each request's
+/// footprint level and the tiles a cached node's lookup would read, and times its direct
+/// evaluation.
 #[derive(Debug)]
-pub struct Tap {
+pub struct Profiler {
+    inner: Direct,
     desc: TextureDesc,
     tile_size: u32,
     streams: Vec<StreamTap>,
@@ -65,15 +70,20 @@ pub struct Tap {
     eval_ns: u64,
     tap_ns: u64,
     timed_calls: u64,
-    /// Time every call (not one in [`CALL_TIMING_PERIOD`]) and add it to `exact_eval_ns`.
+    /// Time every call (not one in [`CALL_TIMING_PERIOD`]) and add it to `exact_eval_ns`: set
+    /// for a pixel's samples after its first.
     exact: bool,
     exact_eval_ns: u64,
+    /// The warm sample under way: when it started and `exact_eval_ns` then.
+    warm_start: Option<(Instant, u64)>,
+    warm: Warm,
 }
 
-impl Tap {
-    fn new(streams: usize) -> Tap {
-        Tap {
-            desc: texture_desc(),
+impl Profiler {
+    fn new(streams: usize) -> Profiler {
+        Profiler {
+            inner: Direct,
+            desc: node_texture(1),
             tile_size: CacheConfig::default().tile_size,
             streams: vec![StreamTap::default(); streams],
             calls: 0,
@@ -82,15 +92,18 @@ impl Tap {
             timed_calls: 0,
             exact: false,
             exact_eval_ns: 0,
+            warm_start: None,
+            warm: Warm::default(),
         }
     }
+}
 
-    /// Records one request of `stream` and evaluates it.
-    pub(crate) fn evaluate(
+impl GraphSource for Profiler {
+    /// Records one request of `request`'s stream and evaluates it.
+    fn evaluate(
         &mut self,
-        stream: u32,
         g: &Graph,
-        plan: &EvalPlan,
+        request: &MaterialGraph,
         fp: &Footprint,
         scratch: &mut EvalScratch,
         out: &mut [Filtered],
@@ -101,7 +114,7 @@ impl Tap {
         let t0 = timed.then(Instant::now);
         let taps = cache::trilinear_taps(&self.desc, self.tile_size, fp.uv, fp.cov);
         let b = if taps.level < 0.0 { 0 } else { (taps.lod as usize + 1).min(BINS - 1) };
-        let st = &mut self.streams[stream as usize];
+        let st = &mut self.streams[request.stream as usize];
         st.requests[b] += 1;
         if b > 0 && !self.exact {
             st.tiles.entry(taps.lower).or_default().0 += 1;
@@ -111,7 +124,7 @@ impl Tap {
         }
         scratch.set_bin(b);
         let t1 = timed.then(Instant::now);
-        g.eval(plan, fp, scratch, &NoOverride, out);
+        self.inner.evaluate(g, request, fp, scratch, out);
         if let (Some(t0), Some(t1)) = (t0, t1) {
             self.tap_ns += (t1 - t0).as_nanos() as u64;
             self.eval_ns += t1.elapsed().as_nanos() as u64;
@@ -122,7 +135,23 @@ impl Tap {
         }
     }
 
-    fn merge(&mut self, o: &Tap) {
+    /// A pixel's samples after its first are timed whole (warm samples), their requests timed
+    /// one by one and not recorded as tile reads.
+    fn begin_sample(&mut self, index: u32) {
+        self.exact = index > 0;
+        self.warm_start = self.exact.then(|| (Instant::now(), self.exact_eval_ns));
+    }
+
+    fn end_sample(&mut self) {
+        if let Some((t, before)) = self.warm_start.take() {
+            let ns = t.elapsed().as_nanos() as u64;
+            self.warm.outside_ns.push(ns.saturating_sub(self.exact_eval_ns - before));
+        }
+    }
+}
+
+impl Profiler {
+    fn merge(&mut self, o: &Profiler) {
         for (a, b) in self.streams.iter_mut().zip(&o.streams) {
             for (x, y) in a.requests.iter_mut().zip(&b.requests) {
                 *x += y;
@@ -137,12 +166,8 @@ impl Tap {
         self.eval_ns += o.eval_ns;
         self.tap_ns += o.tap_ns;
         self.timed_calls += o.timed_calls;
+        self.warm.outside_ns.extend_from_slice(&o.warm.outside_ns);
     }
-}
-
-/// The texture every cached node gets (as [`crate::caching::NodeCache`] creates them).
-fn texture_desc() -> TextureDesc {
-    TextureDesc { channels: 1, format: TexelFormat::F16, texels_per_uv: LEVEL0_TEXELS_PER_UV, max_level: MAX_LEVEL }
 }
 
 /// Whether pixel `(x, y)` is traced at `fraction` (a hash of the pixel, so the subset is spread
@@ -155,8 +180,8 @@ fn traced(x: u32, y: u32, fraction: f64) -> bool {
     (h >> 11) as f64 / (1u64 << 53) as f64 <= fraction
 }
 
-/// Per tile of the image: the tap, counters and the evaluator's binned timings and statistics.
-type TileProfile = (Tap, RenderCounts, Vec<graph::BinnedTimings>, Vec<graph::EvalStats>, Warm);
+/// Per image bucket: its profiler, counters and the evaluator's binned timings and statistics.
+type BucketProfile = (Profiler, RenderCounts, Vec<graph::BinnedTimings>, Vec<graph::EvalStats>);
 
 /// Per sample after a pixel's first: nanoseconds outside graph evaluation. A render's samples of
 /// one pixel share warm processor caches, so these, not first samples, tell the per-sample cost
@@ -183,35 +208,6 @@ impl Warm {
     }
 }
 
-/// One pixel's samples (as `render_pixel_with` takes them) and `extra` more, timing those after
-/// the first.
-#[allow(clippy::too_many_arguments)]
-fn profile_pixel(
-    scene: &Scene,
-    settings: RenderSettings,
-    extra: u32,
-    x: u32,
-    y: u32,
-    counts: &mut RenderCounts,
-    shade: &mut ShadeScratch,
-    warm: &mut Warm,
-) {
-    for s in 0..settings.spp + extra {
-        let (cam, mut rng) = crate::integrator::camera_sample(scene, settings.seed, x, y, s);
-        let tap = shade.tap.as_mut().expect("profiling");
-        tap.exact = s > 0;
-        let before = tap.exact_eval_ns;
-        let t = Instant::now();
-        crate::integrator::radiance(scene, settings, &cam, &mut rng, counts, shade, &mut NoObserver);
-        counts.samples += 1;
-        if s > 0 {
-            let ns = t.elapsed().as_nanos() as u64;
-            let eval = shade.tap.as_ref().expect("profiling").exact_eval_ns - before;
-            warm.outside_ns.push(ns.saturating_sub(eval));
-        }
-    }
-}
-
 /// Runs the profiling render on the current rayon pool and returns the profile.
 pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Profile> {
     if !(opts.pixel_fraction > 0.0 && opts.pixel_fraction <= 1.0) {
@@ -222,52 +218,45 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     }
     let streams: usize = scene.materials.iter().map(|m| m.graphs.len()).sum();
     let (w, h) = (scene.camera.width, scene.camera.height);
-    let tiles: Vec<(u32, u32)> =
-        (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect();
     let settings = opts.settings;
     // Calibrate first: it also brings the cores out of idle, whose slow clocks would otherwise
     // inflate the first tens of milliseconds of the profile.
     let (lookup_ns, fill_ns_per_texel, timer_ns) = calibrate();
     let start = Instant::now();
-    let results: Vec<TileProfile> = tiles
-        .par_iter()
-        .map(|&(tx, ty)| {
-            let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
-            for s in shade.eval_scratches_mut() {
-                s.enable_binned_timing(BINS, PROFILE_TIMING_PERIOD);
+    let results: Vec<BucketProfile> = for_each_bucket(w, h, &|b| {
+        let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, Profiler::new(streams));
+        for s in textures.eval_scratches_mut() {
+            s.enable_binned_timing(BINS, PROFILE_TIMING_PERIOD);
+        }
+        let mut counts = RenderCounts::default();
+        for (x, y) in b.pixels() {
+            if traced(x, y, opts.pixel_fraction) {
+                // A second hash (of the transposed pixel) picks the warm-timed pixels.
+                let extra = u32::from(settings.spp == 1 && traced(y, x, opts.warm_fraction));
+                let n = settings.spp + extra;
+                render_pixel_with(scene, settings, x, y, n, &mut counts, &mut textures, &mut NoObserver);
             }
-            shade.tap = Some(Box::new(Tap::new(streams)));
-            let mut counts = RenderCounts::default();
-            let mut warm = Warm::default();
-            for y in ty * TILE..((ty + 1) * TILE).min(h) {
-                for x in tx * TILE..((tx + 1) * TILE).min(w) {
-                    if traced(x, y, opts.pixel_fraction) {
-                        // A second hash (of the transposed pixel) picks the warm-timed pixels.
-                        let extra = u32::from(settings.spp == 1 && traced(y, x, opts.warm_fraction));
-                        profile_pixel(scene, settings, extra, x, y, &mut counts, &mut shade, &mut warm);
-                    }
-                }
-            }
-            let binned = shade.eval_scratches_mut().iter().map(|s| s.binned_timings().clone()).collect();
-            let mut stats = Vec::new();
-            shade.merge_stats_into(&mut stats);
-            (*shade.tap.take().expect("the tap was set"), counts, binned, stats, warm)
-        })
-        .collect();
+        }
+        let binned = textures.eval_scratches_mut().iter().map(|s| s.binned_timings().clone()).collect();
+        let mut stats = Vec::new();
+        textures.merge_stats_into(&mut stats);
+        (textures.source, counts, binned, stats)
+    })
+    .into_iter()
+    .map(|(_, r)| r)
+    .collect();
     let wall_s = start.elapsed().as_secs_f64();
     let threads = rayon::current_num_threads() as u32;
 
-    let mut tap = Tap::new(streams);
+    let mut tap = Profiler::new(streams);
     let mut counts = RenderCounts::default();
     let mut binned: Vec<graph::BinnedTimings> = Vec::new();
     let mut stats: Vec<graph::EvalStats> = vec![graph::EvalStats::default(); scene.graphs.len()];
-    let mut warm = Warm::default();
     let mut first_samples = 0u64;
-    for (t, c, b, s, w) in &results {
+    for (t, c, b, s) in &results {
         tap.merge(t);
-        warm.outside_ns.extend_from_slice(&w.outside_ns);
         counts.samples += c.samples;
-        first_samples += c.samples - w.outside_ns.len() as u64;
+        first_samples += c.samples - t.warm.outside_ns.len() as u64;
         if binned.is_empty() {
             binned = b.clone();
         } else {
@@ -284,7 +273,7 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
         return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
     }
     // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
-    let outside_thread_s = warm.robust_mean().map_or(0.0, |ns| ns * counts.samples as f64 * 1e-9);
+    let outside_thread_s = tap.warm.robust_mean().map_or(0.0, |ns| ns * counts.samples as f64 * 1e-9);
     let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
     let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
     let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
@@ -353,7 +342,7 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
             level0_texels_per_uv: f64::from(LEVEL0_TEXELS_PER_UV),
             max_level: MAX_LEVEL,
             bytes_per_channel: TexelFormat::F16.bytes() as u32,
-            tile_overhead_bytes: (cache::tile_bytes_for(&texture_desc(), tile_size) - texel_bytes) as u64,
+            tile_overhead_bytes: (cache::tile_bytes_for(&node_texture(1), tile_size) - texel_bytes) as u64,
         },
         machine: MachineCosts { lookup_ns, fill_ns_per_texel, node_overhead_ns, timer_ns },
         graphs,
@@ -468,7 +457,7 @@ pub fn calibrate() -> (f64, f64, f64) {
     let config = CacheConfig { in_flight: cache::InFlight::Wait, ..CacheConfig::with_budget(256 << 20) };
     let tile_size = config.tile_size;
     let mut cache = TileCache::new(config).expect("a valid cache");
-    let desc = TextureDesc { channels: 3, ..texture_desc() };
+    let desc = node_texture(3);
     let tex = cache.add_texture(desc).expect("a valid texture");
     let fill = |r: TexelRequest| [r.uv.x, r.uv.y, 0.5];
     // Fills: one lookup per tile of level 0 along a row, each filling one new tile.

@@ -4,7 +4,7 @@
 use crate::camera::{Camera, Rfilter};
 use crate::emitter::Emitter;
 use crate::geometry::{Intersector, Shape};
-use crate::shading::{Material, SceneGraph};
+use crate::material::{Material, SceneGraph};
 
 /// Settings of Mitsuba's `path` integrator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

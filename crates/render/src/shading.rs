@@ -1,101 +1,60 @@
-//! Materials whose parameters come from procedural graphs, and the per-thread memory that
-//! evaluates those graphs at each shading point.
+//! Graph outputs at shading points: the one seam through which the renderer asks for
+//! procedural texture values.
 //!
-//! A [`Material`] is a [`BsdfDesc`] plus the graph outputs its textures read. Before the BSDF is
-//! built at a hit, [`ShadeScratch::evaluate`] evaluates every output the material needs, filtered
-//! to the hit's uv footprint, in one pass per graph (shared upstream nodes are evaluated once);
-//! [`crate::texture::Texture::GraphOutput`] then reads them by slot.
+//! A shading point asks its thread's [`TextureEvaluator`] for a material's graph outputs at the
+//! hit's footprint ([`TextureEvaluator::evaluate`]). The evaluator owns what every strategy
+//! shares (the per-graph evaluation scratches, the output slots, the record of where values went
+//! non-finite) and hands each (material, graph) request to its [`GraphSource`], which decides
+//! how it is served: [`Direct`] evaluates every node, the tile cache's source
+//! ([`crate::caching::CacheAccess`]) answers cached nodes from mip-mapped tiles, and the
+//! profiler's ([`crate::profiling::Profiler`]) records the request's footprint and times a
+//! direct evaluation. The integrator is generic over the source, so the choice costs nothing per
+//! request and neither the integrator nor this module knows the cache or the profiler.
 
-use crate::bsdf::BsdfDesc;
-use graph::{EvalPlan, EvalScratch, EvalStats, Filtered, Footprint, Graph, NoOverride};
-use std::sync::Arc;
+use crate::material::{Material, MaterialGraph, SceneGraph};
+use graph::{EvalScratch, EvalStats, Filtered, Footprint, Graph, NoOverride};
 
-/// A procedural graph used by the scene (one per MaterialX document).
-#[derive(Debug)]
-pub struct SceneGraph {
-    /// The document it came from (for reports).
-    pub name: String,
-    /// The loaded document; its graph holds every nodegraph of the file.
-    pub document: Arc<graph::Document>,
+/// How a thread's graph requests are served (see the [module docs](self)).
+pub trait GraphSource {
+    /// Evaluates the outputs of `request` (a material's outputs of graph `g`) at footprint `fp`
+    /// into `out`, one value per output of its plan, using `scratch` (`g`'s evaluation memory).
+    fn evaluate(
+        &mut self,
+        g: &Graph,
+        request: &MaterialGraph,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        out: &mut [Filtered],
+    );
+
+    /// Adds the statistics of evaluations made outside the evaluator's scratches (a cache's
+    /// tile fills) to `stats`, one entry per scene graph.
+    fn merge_stats_into(&self, _stats: &mut [EvalStats]) {}
+
+    /// Camera sample `index` of a pixel starts (its path's requests follow).
+    #[inline]
+    fn begin_sample(&mut self, _index: u32) {}
+
+    /// The camera sample begun last has ended.
+    #[inline]
+    fn end_sample(&mut self) {}
 }
 
-impl SceneGraph {
-    /// The document's file name (without folders): how profiles and plans name the graph.
-    pub fn file_name(&self) -> &str {
-        self.name.rsplit(['/', '\\']).next().unwrap_or(&self.name)
-    }
+/// Every node evaluated on every request (shade on hit).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Direct;
 
-    /// The graph.
-    pub fn graph(&self) -> &Graph {
-        self.document.graph()
-    }
-}
-
-/// The outputs of one graph that a material reads.
-#[derive(Clone, Debug)]
-pub struct MaterialGraph {
-    /// Index into the scene's graphs.
-    pub graph: u32,
-    /// Evaluation plan over the outputs.
-    pub plan: EvalPlan,
-    /// For each output of `plan`, the slot its value goes to.
-    pub slots: Vec<u32>,
-    /// Index of this (material, graph) pair among all the scene's: the request stream a
-    /// profile records it as.
-    pub stream: u32,
-}
-
-/// A BSDF and the graph outputs its textures read.
-#[derive(Clone, Debug)]
-pub struct Material {
-    /// The name reports give it: the BSDF's `id`, or its plugin and place in the scene file.
-    pub name: String,
-    /// The BSDF with its (possibly graph-valued) textures.
-    pub bsdf: BsdfDesc,
-    /// Graph outputs to evaluate before building the BSDF; empty for plain Mitsuba materials.
-    pub graphs: Vec<MaterialGraph>,
-    /// Number of slots the outputs fill.
-    pub slot_count: u32,
-    /// Each slot's value averaged over the whole texture (the graph evaluated with a huge
-    /// footprint): what the free-texture lower bound renders with.
-    pub constant_outputs: Vec<Filtered>,
-    /// The slot holding a shading normal (MaterialX `normal` input, e.g. from `normalmap`),
-    /// read in the shading frame: (x, y, z) = tangent, bitangent and normal components.
-    pub normal_slot: Option<u32>,
-}
-
-impl Material {
-    /// Fills [`Material::constant_outputs`]: every output evaluated with a footprint far larger
-    /// than any feature (σ = 100 uv units), i.e. its mean over the plane.
-    pub fn compute_constant_outputs(&mut self, graphs: &[SceneGraph]) {
-        let zero = Filtered::constant(graph::Value::float(0.0));
-        self.constant_outputs = vec![zero; self.slot_count as usize];
-        let fp = Footprint::isotropic(glam::Vec2::splat(0.5), 100.0);
-        for mg in &self.graphs {
-            let g = graphs[mg.graph as usize].graph();
-            let mut scratch = EvalScratch::new(g);
-            let mut tmp = vec![zero; mg.slots.len()];
-            g.eval(&mg.plan, &fp, &mut scratch, &NoOverride, &mut tmp);
-            for (k, &slot) in mg.slots.iter().enumerate() {
-                let mut c = tmp[k];
-                for m in c.ch.iter_mut() {
-                    *m = graph::Moments::constant(m.mean);
-                }
-                self.constant_outputs[slot as usize] = c;
-            }
-        }
-    }
-
-    /// A material without procedural textures.
-    pub fn plain(bsdf: BsdfDesc) -> Self {
-        Material {
-            name: "default".into(),
-            bsdf,
-            graphs: Vec::new(),
-            slot_count: 0,
-            constant_outputs: Vec::new(),
-            normal_slot: None,
-        }
+impl GraphSource for Direct {
+    #[inline]
+    fn evaluate(
+        &mut self,
+        g: &Graph,
+        request: &MaterialGraph,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        out: &mut [Filtered],
+    ) {
+        g.eval(&request.plan, fp, scratch, &NoOverride, out);
     }
 }
 
@@ -151,15 +110,16 @@ impl NonFiniteSample {
     }
 }
 
-/// Per-thread graph evaluation memory and statistics (allocated once per thread or tile), and
-/// the thread's access to the node cache when one is used.
-pub struct ShadeScratch<'a> {
+/// A thread's evaluation of materials' graph outputs at shading points, served by its source
+/// `S`: the per-graph evaluation scratches and output slots (allocated once per thread or image
+/// bucket), and where values went non-finite.
+pub struct TextureEvaluator<S> {
     /// The bounce (0 = first hit) of the vertex being shaded, set by the integrator: reports of
     /// non-finite values name it.
     pub(crate) depth: u32,
     /// Where the current camera sample's graph evaluations first went non-finite.
     sample_origin: Option<GraphNonFinite>,
-    /// The first non-finite samples of this scratch's pixels (at most [`NONFINITE_KEPT`]).
+    /// The first non-finite samples of this evaluator's pixels (at most [`NONFINITE_KEPT`]).
     pub(crate) nonfinite: Vec<NonFiniteSample>,
     /// The first samples on whose path a graph value went non-finite, whether or not the
     /// sample's radiance did (texture reads map NaN to 0); at most [`NONFINITE_KEPT`].
@@ -167,30 +127,17 @@ pub struct ShadeScratch<'a> {
     scratches: Vec<EvalScratch>,
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
-    cache: Option<crate::caching::CacheAccess<'a>>,
-    /// The profiler's per-thread recorder, when profiling.
-    pub(crate) tap: Option<Box<crate::profiling::Tap>>,
+    /// How requests are served.
+    pub source: S,
 }
 
-impl<'a> ShadeScratch<'a> {
-    /// Scratch for every graph of a scene and the largest material, reading cached nodes from
-    /// `cache` when given.
-    pub fn with_cache(
-        graphs: &'a [SceneGraph],
-        materials: &[Material],
-        cache: Option<&'a crate::caching::NodeCache>,
-    ) -> Self {
-        let mut s = Self::new(graphs, materials);
-        s.cache = cache.map(|c| crate::caching::CacheAccess::new(c, graphs));
-        s
-    }
-
-    /// Scratch for every graph of a scene and the largest material.
-    pub fn new(graphs: &[SceneGraph], materials: &[Material]) -> Self {
+impl<S: GraphSource> TextureEvaluator<S> {
+    /// An evaluator for every graph of a scene and its largest material, served by `source`.
+    pub fn new(graphs: &[SceneGraph], materials: &[Material], source: S) -> Self {
         let slots = materials.iter().map(|m| m.slot_count as usize).max().unwrap_or(0);
         let per_graph = materials.iter().flat_map(|m| m.graphs.iter().map(|g| g.slots.len())).max().unwrap_or(0);
         let zero = Filtered::constant(graph::Value::float(0.0));
-        ShadeScratch {
+        TextureEvaluator {
             depth: 0,
             sample_origin: None,
             nonfinite: Vec::new(),
@@ -198,8 +145,7 @@ impl<'a> ShadeScratch<'a> {
             scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
-            cache: None,
-            tap: None,
+            source,
         }
     }
 
@@ -210,14 +156,7 @@ impl<'a> ShadeScratch<'a> {
             let g = graphs[mg.graph as usize].graph();
             let n = mg.slots.len();
             let scratch = &mut self.scratches[mg.graph as usize];
-            if let Some(tap) = &mut self.tap {
-                tap.evaluate(mg.stream, g, &mg.plan, fp, scratch, &mut self.tmp[..n]);
-            } else {
-                match &self.cache {
-                    Some(access) => g.eval(&mg.plan, fp, scratch, &access.for_graph(mg.graph), &mut self.tmp[..n]),
-                    None => g.eval(&mg.plan, fp, scratch, &NoOverride, &mut self.tmp[..n]),
-                }
-            }
+            self.source.evaluate(g, mg, fp, scratch, &mut self.tmp[..n]);
             if let Some(at) = scratch.take_nonfinite() {
                 if self.sample_origin.is_none() {
                     self.sample_origin = Some(GraphNonFinite {
@@ -235,14 +174,15 @@ impl<'a> ShadeScratch<'a> {
         &self.outputs[..material.slot_count as usize]
     }
 
-    /// Starts a camera sample: forgets the previous sample's non-finite origin.
+    /// Starts camera sample `index`: forgets the previous sample's non-finite origin.
     #[inline]
-    pub(crate) fn begin_sample(&mut self) {
+    pub(crate) fn begin_sample(&mut self, index: u32) {
         self.sample_origin = None;
+        self.source.begin_sample(index);
     }
 
     /// Records that sample `sample` of pixel (`x`, `y`) had a non-finite radiance (kept if it is
-    /// among this scratch's first [`NONFINITE_KEPT`]).
+    /// among this evaluator's first [`NONFINITE_KEPT`]).
     pub(crate) fn record_nonfinite(&mut self, x: u32, y: u32, sample: u32) {
         if self.nonfinite.len() < NONFINITE_KEPT {
             self.nonfinite.push(NonFiniteSample { x, y, sample, origin: self.sample_origin.clone() });
@@ -250,9 +190,10 @@ impl<'a> ShadeScratch<'a> {
     }
 
     /// Ends sample `sample` of pixel (`x`, `y`): if a graph value went non-finite on its path,
-    /// keeps where (among this scratch's first [`NONFINITE_KEPT`]).
+    /// keeps where (among this evaluator's first [`NONFINITE_KEPT`]).
     #[inline]
     pub(crate) fn end_sample(&mut self, x: u32, y: u32, sample: u32) {
+        self.source.end_sample();
         if self.sample_origin.is_some() && self.graph_nonfinite.len() < NONFINITE_KEPT {
             self.graph_nonfinite.push(NonFiniteSample { x, y, sample, origin: self.sample_origin.clone() });
         }
@@ -263,36 +204,14 @@ impl<'a> ShadeScratch<'a> {
         &mut self.scratches
     }
 
-    /// Adds this scratch's per-node statistics to `stats` (one entry per scene graph).
+    /// Adds this evaluator's per-node statistics to `stats` (one entry per scene graph).
     pub fn merge_stats_into(&self, stats: &mut Vec<EvalStats>) {
         stats.resize(self.scratches.len(), EvalStats::default());
         for (s, out) in self.scratches.iter().zip(stats.iter_mut()) {
             s.merge_stats_into(out);
         }
-        if let Some(access) = &self.cache {
-            access.merge_fill_stats_into(stats);
-        }
+        self.source.merge_stats_into(stats);
     }
-}
-
-/// The footprint a material's graphs are evaluated over at surface hit `si`: its uv centre and
-/// uv covariance `cov`, and the hit's geometry for nodes that read more than uv (`position`,
-/// `normal`, `tangent`, `bitangent`, 3D noises): world position, shading normal, the shading
-/// frame's tangent (∂p/∂u made orthogonal to the normal) and bitangent, ∂p/∂u, ∂p/∂v (so the
-/// position's footprint is `J Σ Jᵀ`) and ∂n/∂u, ∂n/∂v. World space is also MaterialX's object
-/// space here: shapes are transformed to world space at load.
-pub fn footprint_at(si: &crate::geometry::SurfaceInteraction, cov: glam::Mat2) -> Footprint {
-    let geom = graph::Geometry {
-        p: si.p,
-        n: si.sh.n,
-        t: si.sh.s,
-        b: si.sh.t,
-        dpdu: si.dpdu,
-        dpdv: si.dpdv,
-        dndu: si.dndu,
-        dndv: si.dndv,
-    };
-    Footprint::with_geometry(si.uv, cov, geom)
 }
 
 /// The shading frame bent to the normal `n_ts` given in the frame's own coordinates (a graph's

@@ -3,7 +3,8 @@
 
 use render::caching::{NodeCache, Strategy};
 use render::film::{relative_mse, Image};
-use render::integrator::{render_cached, RenderSettings};
+use render::caching::render_cached;
+use render::integrator::RenderSettings;
 use render::scene::Scene;
 use std::path::PathBuf;
 

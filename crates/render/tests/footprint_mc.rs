@@ -4,7 +4,7 @@
 //! The footprint crate verifies Algorithm 1 on analytic geometry of its own. Here the scenes are
 //! Mitsuba XML loaded by `render::loader::load_str`, rays go through the renderer's BVH
 //! (`Accel::intersect`) and `geometry::interaction`, vertices come from
-//! `pathfootprint::vertex_of`, and the event and roughness at each vertex come from sampling the
+//! `SurfaceInteraction::footprint_vertex`, and the event and roughness at each vertex come from sampling the
 //! scene's own BSDF there (`pathfootprint::scatter_of`, `BsdfSample::alpha`), exactly as the
 //! integrator hands them to the tracker. The prediction is the renderer's `PathFootprint` (and,
 //! identically, the footprint crate's `FootprintTracker` driven directly).
@@ -38,7 +38,7 @@ use render::bsdf::BsdfSample;
 use render::camera::CameraRay;
 use render::geometry::{interaction, SurfaceInteraction};
 use render::integrator::spawn_ray;
-use render::pathfootprint::{scatter_of, vertex_of, FootprintMode, PathFootprint};
+use render::pathfootprint::{scatter_of, FootprintMode, PathFootprint};
 use render::sampling::Rng;
 use render::scene::Scene;
 use render::texture::ShadeContext;
@@ -214,7 +214,7 @@ fn trace_base(scene: &Scene, nodes: &[Node], film: Vec2) -> Result<BasePath, Str
             }
         }
         let si = interaction(&scene.shapes, &ray, &hit);
-        let v = vertex_of(&si);
+        let v = si.footprint_vertex();
         bp.shapes.push(hit.shape);
         bp.sis.push(si);
         bp.vertices.push(v);
@@ -294,7 +294,7 @@ fn pick_base(scene: &Scene, nodes: &[Node], preferred: (u32, u32)) -> BasePath {
 /// Which frame a perturbed vertex builds its half vector in.
 #[derive(Clone, Copy, PartialEq)]
 enum FrameMode {
-    /// The perturbed vertex's own shading frame, as the renderer reports it (`vertex_of`).
+    /// The perturbed vertex's own shading frame, as the renderer reports it (`SurfaceInteraction::footprint_vertex`).
     Renderer,
     /// The base vertex's frame carried to the perturbed normal by minimal rotation (the
     /// convention the tracker's `B_i` assumes for the frame's motion).
@@ -332,7 +332,7 @@ fn trace_perturbed(
         if i + 1 == k {
             break;
         }
-        let mut v = vertex_of(&si);
+        let mut v = si.footprint_vertex();
         if frames == FrameMode::Transported {
             let b = &bp.vertices[i];
             v.t = min_rotation(b.n, v.n, b.t);

@@ -316,7 +316,7 @@ fn library_materials_render_and_only_uv_nodes_are_cached() {
     assert!(!names.iter().any(|n| n.starts_with("NG_solid_marble/")), "position-dependent nodes cached: {names:?}");
     let settings = render::integrator::RenderSettings::new(4, 3);
     let plain = render::integrator::render(&scene, settings, &|_| {}).image;
-    let cached = render::integrator::render_cached(&scene, settings, Some(&nc), &|_| {}).image;
+    let cached = render::caching::render_cached(&scene, settings, Some(&nc), &|_| {}).image;
     let mean: f32 = plain.pixels.iter().map(|p| p.x + p.y + p.z).sum::<f32>() / plain.pixels.len() as f32;
     assert!(mean.is_finite() && mean > 0.05, "mean {mean}");
     let e = render::film::relative_mse(&cached, &plain);

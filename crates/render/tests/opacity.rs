@@ -11,7 +11,7 @@ use render::film::Image;
 use render::geometry::SurfaceInteraction;
 use render::integrator::{radiance, render, FilterScale, PathObserver, RenderCounts, RenderSettings, MAX_PASS_THROUGH};
 use render::scene::Scene;
-use render::shading::ShadeScratch;
+use render::shading::{Direct, TextureEvaluator};
 use std::path::{Path, PathBuf};
 
 fn data() -> PathBuf {
@@ -373,7 +373,7 @@ impl PathObserver for Footprints {
 
 fn trace(scene: &Scene, x: u32, y: u32, sample: u32) -> Footprints {
     let (cam, mut rng) = render::integrator::camera_sample(scene, 7, x, y, sample);
-    let mut shade = ShadeScratch::new(&scene.graphs, &scene.materials);
+    let mut shade = TextureEvaluator::new(&scene.graphs, &scene.materials, Direct);
     let mut obs = Footprints::default();
     radiance(scene, RenderSettings::new(1, 7), &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut obs);
     obs

@@ -104,7 +104,7 @@ pub fn run(args: FootprintArgs) -> Result<()> {
     // Sample 0 of this pixel, with the same stream and filter offset as `tessera render`.
     let (cam, mut rng) = render::integrator::camera_sample(&scene, seed, x, y, 0);
     let mut rec = Recorder { density: args.density, vertices: Vec::new() };
-    let mut shade = render::shading::ShadeScratch::new(&scene.graphs, &scene.materials);
+    let mut shade = render::shading::TextureEvaluator::new(&scene.graphs, &scene.materials, render::shading::Direct);
     let l = radiance(&scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut rec);
     // A vertex without an event is where a path ended by Russian roulette after scattering.
     let out = json!({
