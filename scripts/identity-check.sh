@@ -14,11 +14,11 @@ bin=${2:-target/release/tessera}
 root=$(cd "$(dirname "$0")/.." && pwd)
 shared="$root/../shared"
 mkdir -p "$out"
-# Keys that hold timings (or things derived from them), dropped before comparing.
+# Keys that hold timings (or things derived from them) or output paths, dropped before comparing.
 normalise() {
   python3 - "$1" "$2" <<'PY'
 import json, sys
-TIMING = {"phases", "throughput", "threads", "estimated_s", "images", "wall_s", "outside_thread_s",
+TIMING = {"phases", "throughput", "threads", "estimated_s", "images", "aovs", "wall_s", "outside_thread_s",
           "texture_thread_s", "tap_thread_s", "machine", "cost", "report"}
 def strip(x):
     if isinstance(x, dict):
@@ -34,7 +34,10 @@ for scene in "${scenes[@]}"; do
   name=$(basename "$scene" .xml)
   for strategy in none outputs all; do
     tag="$name.$strategy"
-    "$bin" render "$scene" --spp 2 -D res=48 --quiet --threads 1 --strategy "$strategy" \
+    # The footprint AOV once per scene (it traces footprints even where no texture reads them).
+    aov=()
+    [ "$strategy" = none ] && aov=(--aov footprint)
+    "$bin" render "$scene" --spp 2 -D res=48 --quiet --threads 1 --strategy "$strategy" "${aov[@]}" \
       --out "$out/$tag.exr" --stats-json "$out/$tag.raw.json"
     normalise "$out/$tag.raw.json" "$out/$tag.stats.json"
     rm "$out/$tag.raw.json"

@@ -1,0 +1,411 @@
+//! Unidirectional path tracing with next-event estimation and multiple importance sampling,
+//! following the semantics of Mitsuba 3's `path` integrator (`max_depth`, `rr_depth`).
+//!
+//! The image is split into buckets rendered in parallel by rayon ([`for_each_bucket`]). Every
+//! camera sample draws from its own random stream keyed by (seed, pixel, sample index), and
+//! every pixel is the plain mean of its own samples, so the image is bit-identical whatever the
+//! number of threads. One camera ray's path is traced by [`radiance`] (module `path`).
+
+mod path;
+
+pub use path::{radiance, recentre_fraction, spawn_ray, MAX_PASS_THROUGH};
+
+use crate::camera::CameraRay;
+use crate::film::Image;
+use crate::geometry::SurfaceInteraction;
+use crate::math::Spectrum;
+use crate::pathfootprint::FootprintMode;
+use crate::sampling::Rng;
+use crate::scene::Scene;
+use crate::shading::{Direct, GraphSource, NonFiniteSample, TextureEvaluator, NONFINITE_KEPT};
+use footprint::Vertex;
+use glam::{DMat2, Vec2, Vec3};
+use rayon::prelude::*;
+use std::time::{Duration, Instant};
+
+/// Side of the square image buckets handed to threads.
+pub const BUCKET: u32 = 16;
+
+/// A rectangle of the image rendered by one thread: pixels `x0..x1` × `y0..y1`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Bucket {
+    /// First column.
+    pub x0: u32,
+    /// First row.
+    pub y0: u32,
+    /// One past the last column.
+    pub x1: u32,
+    /// One past the last row.
+    pub y1: u32,
+}
+
+impl Bucket {
+    /// The bucket's pixels, row by row.
+    pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
+        (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
+    }
+
+    /// Number of pixels.
+    pub fn len(self) -> usize {
+        ((self.x1 - self.x0) * (self.y1 - self.y0)) as usize
+    }
+
+    /// Whether the bucket has no pixels.
+    pub fn is_empty(self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// Renders the buckets of a `w` × `h` image in parallel on the current rayon pool, `work`
+/// making each bucket's result; the results come back in row-major bucket order, whatever the
+/// thread count. Rendering and profiling both drive their buckets through this.
+pub fn for_each_bucket<T: Send>(w: u32, h: u32, work: &(dyn Fn(Bucket) -> T + Sync)) -> Vec<(Bucket, T)> {
+    let buckets: Vec<Bucket> = (0..h.div_ceil(BUCKET))
+        .flat_map(|by| {
+            (0..w.div_ceil(BUCKET)).map(move |bx| {
+                let (x0, y0) = (bx * BUCKET, by * BUCKET);
+                Bucket { x0, y0, x1: (x0 + BUCKET).min(w), y1: (y0 + BUCKET).min(h) }
+            })
+        })
+        .collect();
+    buckets.par_iter().map(|&b| (b, work(b))).collect()
+}
+
+/// Counts gathered while rendering.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RenderCounts {
+    /// Camera samples taken.
+    pub samples: u64,
+    /// Rays traced for closest hits (camera and bounce rays).
+    pub rays: u64,
+    /// Shadow rays traced for next-event estimation.
+    pub shadow_rays: u64,
+    /// Samples whose radiance was NaN or infinite and were discarded.
+    pub nonfinite_samples: u64,
+}
+
+impl RenderCounts {
+    fn add(&mut self, o: &RenderCounts) {
+        self.samples += o.samples;
+        self.rays += o.rays;
+        self.shadow_rays += o.shadow_rays;
+        self.nonfinite_samples += o.nonfinite_samples;
+    }
+}
+
+/// Bounces the footprint AOV reports (vertices x₁, x₂, x₃).
+pub const AOV_BOUNCES: usize = 3;
+
+/// Value of the footprint AOV where no sample reached that bounce.
+pub const AOV_NO_VERTEX: f32 = footprint::LOD_MIN;
+
+/// What a render produced.
+#[derive(Clone, Debug)]
+pub struct RenderOutput {
+    /// The image (linear RGB).
+    pub image: Image,
+    /// Footprint AOV when asked for: channel k is the mean LOD (log2 of the footprint's
+    /// standard deviation along its major axis, in texels of the requested density) at bounce
+    /// k + 1, over the samples that reached it; [`AOV_NO_VERTEX`] where none did.
+    pub footprint_aov: Option<Image>,
+    /// Counters.
+    pub counts: RenderCounts,
+    /// Per scene graph: node evaluations and work counters.
+    pub graph_stats: Vec<graph::EvalStats>,
+    /// The first samples whose radiance was not finite (at most [`NONFINITE_KEPT`], ordered by
+    /// pixel row, column and sample), with where each came from.
+    pub nonfinite: Vec<NonFiniteSample>,
+    /// The first samples on whose path a procedural texture value went non-finite (whether or
+    /// not their radiance did), in the same order, with where.
+    pub graph_nonfinite: Vec<NonFiniteSample>,
+    /// Wall-clock time of the rendering phase.
+    pub time: Duration,
+}
+
+/// Rendering parameters that the command line may override.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderSettings {
+    /// Samples per pixel.
+    pub spp: u32,
+    /// Seed of all random streams.
+    pub seed: u64,
+    /// Footprint estimator carried by camera paths.
+    pub footprint: FootprintMode,
+    /// When set, also produce the footprint AOV with this many texels per uv unit.
+    pub footprint_aov_density: Option<f64>,
+    /// Replace every graph output by its mean over the texture: the free-texture lower bound
+    /// on render time.
+    pub free_textures: bool,
+    /// Scale of the texture filter relative to the footprint (see [`FilterScale`]).
+    pub filter_scale: FilterScale,
+}
+
+/// How wide textures are filtered relative to the path footprint.
+///
+/// The default, `Fixed(1)`, filters each sample over the whole footprint (σ = ½ px at the first
+/// hit, the paper's pixel filter): the strongest anti-aliasing at few samples, and the footprints
+/// the tile cache and the selective-caching planner are built around. At the first hit the
+/// footprint is centred where the pixel centre's ray meets the surface ([`recentre_fraction`]),
+/// so every sample reads the texture filtered by the pixel filter once: textures add no noise
+/// there, and the render converges to the point-sampled image as far as the graph's filtered
+/// approximations allow. `Auto` narrows the texture filter as samples accumulate, as pbrt-v4
+/// does with its ray differentials (`max(1/8, 1/√spp)`, centred part of the way so that the
+/// total blur is still the pixel filter): it relies less on the filtered approximations (the
+/// footprint is finer), at the price of texture noise and finer footprints: more noise octaves
+/// evaluated, and finer (more, costlier) cache tiles. Footprints themselves (path statistics,
+/// AOVs, `tessera footprint`) are never scaled or moved.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FilterScale {
+    /// A fixed scale of the footprint's standard deviation (1 = the paper's footprint).
+    Fixed(f32),
+    /// `max(1/8, 1/√spp)`.
+    Auto,
+}
+
+impl FilterScale {
+    /// The scale of the footprint's standard deviation for a render of `spp` samples per pixel.
+    pub fn at(self, spp: u32) -> f32 {
+        match self {
+            FilterScale::Fixed(s) => s,
+            FilterScale::Auto => (1.0 / (spp.max(1) as f32).sqrt()).max(0.125),
+        }
+    }
+}
+
+impl std::str::FromStr for FilterScale {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "auto" {
+            return Ok(FilterScale::Auto);
+        }
+        match s.parse::<f32>() {
+            Ok(v) if v.is_finite() && v >= 0.0 => Ok(FilterScale::Fixed(v)),
+            _ => Err(format!("filter scale must be 'auto' or a non-negative number, got '{s}'")),
+        }
+    }
+}
+
+impl RenderSettings {
+    /// The factor applied to uv covariances before textures are filtered.
+    #[inline]
+    pub fn filter_scale_squared(&self) -> f32 {
+        let s = self.filter_scale.at(self.spp);
+        s * s
+    }
+}
+
+impl RenderSettings {
+    /// `spp` samples with `seed`, the default (covariance) footprints and the default texture
+    /// filter (the whole footprint, [`FilterScale::Fixed`]`(1)`).
+    pub fn new(spp: u32, seed: u64) -> Self {
+        RenderSettings {
+            spp,
+            seed,
+            footprint: FootprintMode::default(),
+            footprint_aov_density: None,
+            free_textures: false,
+            filter_scale: FilterScale::Fixed(1.0),
+        }
+    }
+}
+
+/// What happened at a path vertex.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// Glossy or specular reflection.
+    Reflect,
+    /// Transmission through an interface.
+    Refract,
+    /// A diffuse bounce.
+    Diffuse,
+    /// The path ended on an emitter.
+    Emit,
+    /// The path ended here without scattering (depth limit, roulette, black or back-facing BSDF).
+    Absorb,
+    /// The ray left the scene.
+    Escape,
+}
+
+impl Event {
+    /// Lower-case name used in JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Event::Reflect => "reflect",
+            Event::Refract => "refract",
+            Event::Diffuse => "diffuse",
+            Event::Emit => "emit",
+            Event::Absorb => "absorb",
+            Event::Escape => "escape",
+        }
+    }
+}
+
+/// Receives what happens along a camera path; the render loop uses [`NoObserver`], which
+/// compiles to nothing.
+pub trait PathObserver {
+    /// Whether this observer needs footprints even when no material asks for them.
+    const WANTS_FOOTPRINTS: bool = false;
+    /// A surface hit at `depth` (0 = first hit) with its tangent-plane footprint covariance.
+    fn hit(&mut self, _depth: u32, _si: &SurfaceInteraction, _vertex: Option<&Vertex>, _var: DMat2) {}
+    /// What the path did at `depth`: the sampled event with the lobe's roughness and IOR ratio.
+    fn event(&mut self, _depth: u32, _event: Event, _alpha: f32, _eta: f32) {}
+    /// The ray left the scene after `depth` hits, along `dir`.
+    fn escape(&mut self, _depth: u32, _dir: Vec3) {}
+}
+
+/// An observer that records nothing.
+pub struct NoObserver;
+impl PathObserver for NoObserver {}
+
+/// A bucket's pixels (radiance, footprint AOV), counters, graph statistics and non-finite
+/// samples.
+struct BucketResult {
+    pixels: Vec<(Spectrum, Spectrum)>,
+    counts: RenderCounts,
+    stats: Vec<graph::EvalStats>,
+    nonfinite: Vec<NonFiniteSample>,
+    graph_nonfinite: Vec<NonFiniteSample>,
+}
+
+/// Renders `scene` with every graph node evaluated on every request; `progress` is called with
+/// the number of pixels each image bucket finished.
+pub fn render(scene: &Scene, settings: RenderSettings, progress: &(dyn Fn(u64) + Sync)) -> RenderOutput {
+    render_with(scene, settings, &|| Direct, progress)
+}
+
+/// Renders `scene` with graph requests served by the sources `source` makes (one per image
+/// bucket): [`Direct`], or a cache's (`crate::caching::render_cached`).
+pub fn render_with<S: GraphSource>(
+    scene: &Scene,
+    settings: RenderSettings,
+    source: &(dyn Fn() -> S + Sync),
+    progress: &(dyn Fn(u64) + Sync),
+) -> RenderOutput {
+    let start = Instant::now();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let results = for_each_bucket(w, h, &|b| {
+        let mut counts = RenderCounts::default();
+        let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, source());
+        let mut pixels = Vec::with_capacity(b.len());
+        for (x, y) in b.pixels() {
+            pixels.push(render_pixel_aov(scene, settings, x, y, &mut counts, &mut textures));
+        }
+        progress(pixels.len() as u64);
+        let mut stats = Vec::new();
+        textures.merge_stats_into(&mut stats);
+        BucketResult {
+            pixels,
+            counts,
+            stats,
+            nonfinite: std::mem::take(&mut textures.nonfinite),
+            graph_nonfinite: std::mem::take(&mut textures.graph_nonfinite),
+        }
+    });
+    let mut image = Image::new(w, h);
+    let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
+    let mut counts = RenderCounts::default();
+    let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
+    let (mut nonfinite, mut graph_nonfinite) = (Vec::new(), Vec::new());
+    for (b, r) in &results {
+        counts.add(&r.counts);
+        nonfinite.extend_from_slice(&r.nonfinite);
+        graph_nonfinite.extend_from_slice(&r.graph_nonfinite);
+        graph::EvalStats::merge_all(&mut graph_stats, &r.stats);
+        for ((x, y), p) in b.pixels().zip(&r.pixels) {
+            image.pixels[(y * w + x) as usize] = p.0;
+            if let Some(a) = &mut aov {
+                a.pixels[(y * w + x) as usize] = p.1;
+            }
+        }
+    }
+    for list in [&mut nonfinite, &mut graph_nonfinite] {
+        list.sort_by_key(|n: &NonFiniteSample| (n.y, n.x, n.sample));
+        list.truncate(NONFINITE_KEPT);
+    }
+    RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, graph_nonfinite, time: start.elapsed() }
+}
+
+/// Accumulates per-bounce LODs for the footprint AOV.
+struct LodObserver {
+    density: f64,
+    sum: [f64; AOV_BOUNCES],
+    count: [u32; AOV_BOUNCES],
+}
+
+impl PathObserver for LodObserver {
+    const WANTS_FOOTPRINTS: bool = true;
+    fn hit(&mut self, depth: u32, _si: &SurfaceInteraction, vertex: Option<&Vertex>, var: DMat2) {
+        if let (Some(v), true) = (vertex, (depth as usize) < AOV_BOUNCES) {
+            let lod = footprint::lod(footprint::uv_covariance(var, v), self.density);
+            self.sum[depth as usize] += lod as f64;
+            self.count[depth as usize] += 1;
+        }
+    }
+}
+
+/// A pixel's radiance and, when asked for, its footprint AOV value.
+fn render_pixel_aov<S: GraphSource>(
+    scene: &Scene,
+    settings: RenderSettings,
+    x: u32,
+    y: u32,
+    counts: &mut RenderCounts,
+    textures: &mut TextureEvaluator<S>,
+) -> (Spectrum, Spectrum) {
+    let spp = settings.spp;
+    let Some(density) = settings.footprint_aov_density else {
+        return (render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut NoObserver), Spectrum::ZERO);
+    };
+    let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
+    let l = render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut obs);
+    let lods: [f32; AOV_BOUNCES] =
+        std::array::from_fn(
+            |k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX },
+        );
+    (l, Spectrum::from_array(lods))
+}
+
+/// Camera sample `s` of pixel (`x`, `y`) in a render seeded by `seed`: its ray, through the film
+/// point the pixel filter warps [`crate::sampling::pixel_sample`] to (so a pixel's samples
+/// cover its filter evenly), and the random stream its path draws from. Every renderer entry
+/// point (render, profiling, `tessera footprint`) takes its samples from here, so they agree.
+pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
+    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
+    let offset = scene.rfilter.warp(crate::sampling::pixel_sample(seed, pixel_index, u64::from(s)));
+    let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
+    let mut cam = scene.camera.generate_ray(film);
+    cam.film_offset = offset;
+    (cam, Rng::for_sample(seed, pixel_index, u64::from(s)))
+}
+
+/// Mean radiance of one pixel over its first `samples` samples (a render takes
+/// `settings.spp`), reporting every path to `obs`; non-finite samples are left out of the mean
+/// and recorded in `textures`.
+#[allow(clippy::too_many_arguments)]
+pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
+    scene: &Scene,
+    settings: RenderSettings,
+    x: u32,
+    y: u32,
+    samples: u32,
+    counts: &mut RenderCounts,
+    textures: &mut TextureEvaluator<S>,
+    obs: &mut O,
+) -> Spectrum {
+    let mut sum = Spectrum::ZERO;
+    for s in 0..samples {
+        let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
+        textures.begin_sample(s);
+        let l = radiance(scene, settings, &cam, &mut rng, counts, textures, obs);
+        counts.samples += 1;
+        if l.is_finite() {
+            sum += l;
+        } else {
+            counts.nonfinite_samples += 1;
+            textures.record_nonfinite(x, y, s);
+        }
+        textures.end_sample(x, y, s);
+    }
+    sum / samples.max(1) as f32
+}
+

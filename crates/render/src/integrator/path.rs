@@ -1,0 +1,529 @@
+//! One camera ray's radiance: the loop over its path's vertices, and the pieces each vertex
+//! calls — emission met by chance, the pass-through of partly transparent surfaces, next-event
+//! estimation with its shadow rays' transmittance, and the footprint the path carries.
+//!
+//! The loop follows Mitsuba 3's `path` integrator (`max_depth`, `rr_depth`, MIS by the power
+//! heuristic); it reads like pbrt's `PathIntegrator::Li`, with [`FootprintCarrier`] owning the
+//! footprint state that pbrt keeps in its ray differentials.
+
+use super::{Event, PathObserver, RenderCounts, RenderSettings};
+use crate::bsdf::{Bsdf, BsdfSample, LobeKind};
+use crate::camera::CameraRay;
+use crate::emitter::Emitter;
+use crate::geometry::{interaction, Ray, SurfaceInteraction};
+use crate::material::Material;
+use crate::math::{max_component, Frame, Spectrum};
+use crate::pathfootprint::{shadow_scatter, FootprintMode, PathFootprint};
+use crate::sampling::Rng;
+use crate::scene::Scene;
+use crate::shading::{GraphSource, TextureEvaluator};
+use crate::texture::ShadeContext;
+use footprint::Vertex;
+use glam::{DMat2, DVec2, Mat2, Vec2, Vec3};
+
+/// Offsets a ray origin off the surface along the geometric normal, on the side of `d`.
+#[inline]
+pub fn spawn_ray(si: &SurfaceInteraction, d: Vec3) -> Ray {
+    let eps = ray_epsilon(si.p);
+    let side = if si.ng.dot(d) >= 0.0 { 1.0 } else { -1.0 };
+    Ray { o: si.p + si.ng * (eps * side), d, tmin: 0.0, tmax: f32::INFINITY }
+}
+
+#[inline]
+fn ray_epsilon(p: Vec3) -> f32 {
+    2e-4 * (1.0 + p.abs().max_element())
+}
+
+/// Power heuristic with exponent 2.
+#[inline]
+fn mis(a: f32, b: f32) -> f32 {
+    let (a2, b2) = (a * a, b * b);
+    if a > 0.0 && (a2 + b2).is_finite() {
+        a2 / (a2 + b2)
+    } else if a > 0.0 {
+        // Overflowing squares: fall back to the balance heuristic.
+        a / (a + b)
+    } else {
+        0.0
+    }
+}
+
+/// Most surfaces a ray passes straight through in a row (partial opacity). A camera or bounce
+/// ray that would pass through more ends its path there, and a shadow ray crossing more is
+/// taken as blocked: the only bias is on rays that cross more than this many partly
+/// transparent layers between two scattering events, and it bounds the work should a ray ever
+/// re-hit the surface it left.
+pub const MAX_PASS_THROUGH: u32 = 128;
+
+/// The distance along a ray past its hit at `t` (point `si`) from which a ray passing straight
+/// through resumes. The ray keeps its origin and direction, so whatever lies behind is hit at
+/// exactly the distance (and point) it would be without the surface; the step of one
+/// [`ray_epsilon`] skips the surface itself, including a mesh's neighbouring triangles at a
+/// shared edge.
+#[inline]
+fn past(si: &SurfaceInteraction, t: f32) -> f32 {
+    t + ray_epsilon(si.p)
+}
+
+/// How far toward the pixel centre a camera ray's first vertex moves its texture footprint, as a
+/// fraction of the way.
+///
+/// A sample's film offset δ is drawn from the pixel filter (σ = ½ px), and the first vertex's
+/// footprint is that same filter projected onto the surface (σ scaled by `k`, the texture
+/// filter scale). Filtering around the sample's own hit blurs the texture twice: a render
+/// converges to the texture blurred by σ√(1 + k²), not by the pixel filter. Centring the
+/// footprint a fraction `c` of the way from the hit to where the pixel centre's ray meets the
+/// hit's tangent plane leaves a spread of `(1 − c)σ` in the centres, so the expected texture is
+/// blurred by `σ √((1 − c)² + k²)`: the pixel filter exactly (in the footprint's linear model)
+/// when `c = 1 − √(1 − k²)`. For the whole footprint (`k` = 1) `c` = 1: every sample reads the
+/// texture filtered over its pixel, which then adds no noise of its own.
+pub fn recentre_fraction(filter_scale: f32) -> f64 {
+    let k = filter_scale as f64;
+    1.0 - (1.0 - k * k).max(0.0).sqrt()
+}
+
+/// Where a texture footprint is centred relative to its hit, in uv and in world space.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct CentreShift {
+    uv: Vec2,
+    p: Vec3,
+}
+
+/// The offset from a camera ray's first hit `v` to its texture footprint's centre
+/// ([`recentre_fraction`] of the way to the pixel centre's ray's hit on the tangent plane); zero
+/// for estimators other than the covariance tracker (the ray cone and pbrt-style differentials
+/// keep their published centring), when the centre's ray does not meet the plane in front of
+/// the camera, or for a non-finite result.
+fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) -> CentreShift {
+    if settings.footprint != FootprintMode::Covariance || cam.film_offset == Vec2::ZERO {
+        return CentreShift::default();
+    }
+    let c = recentre_fraction(settings.filter_scale.at(settings.spp));
+    // The pixel centre's ray (directions are linear in film position) meets the hit's tangent
+    // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
+    let o = cam.ray.o.as_dvec3();
+    let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
+    let local = v.local();
+    let g = local.geometric_normal;
+    let (num, den) = ((v.p - o).dot(g), dc.dot(g));
+    if !(num * den > 0.0) {
+        return CentreShift::default();
+    }
+    let d = o + dc * (num / den) - v.p;
+    let shift = DVec2::new(d.dot(v.t), d.dot(v.b)) * c;
+    if !(shift.is_finite() && shift.length_squared() <= footprint::MAX_VARIANCE) {
+        return CentreShift::default();
+    }
+    CentreShift { uv: (local.uv_jacobian * shift).as_vec2(), p: (v.t * shift.x + v.b * shift.y).as_vec3() }
+}
+
+/// What a material's textures are filtered over at a hit: the hit as a footprint vertex (none
+/// when footprints are not tracked: textures are then read at a point), the path's
+/// tangent-plane covariance there, and where the filter is centred relative to the hit.
+#[derive(Clone, Copy, Debug, Default)]
+struct TextureFootprint {
+    vertex: Option<Vertex>,
+    var: DMat2,
+    shift: CentreShift,
+}
+
+impl TextureFootprint {
+    /// A point at the hit (no footprint).
+    const POINT: TextureFootprint = TextureFootprint { vertex: None, var: DMat2::ZERO, shift: CentreShift::ZERO };
+}
+
+impl CentreShift {
+    const ZERO: CentreShift = CentreShift { uv: Vec2::ZERO, p: Vec3::ZERO };
+}
+
+/// A path's footprint at a hit it reached: what textures read there, and the estimator's state
+/// that the path keeps if it scatters there.
+struct HitFootprint {
+    texture: TextureFootprint,
+    state: PathFootprint,
+}
+
+/// The footprint a camera path carries from vertex to vertex (pbrt carries its ray
+/// differentials the same way).
+struct FootprintCarrier {
+    /// Whether footprints are tracked at all: they cost a few hundred nanoseconds per bounce, so
+    /// only when a material's textures or the observer will read them.
+    track: bool,
+    /// The estimator's state after the last scattering vertex (or at the camera).
+    state: PathFootprint,
+    /// The last scattering vertex and the BSDF sample taken there; `None` before the first.
+    last: Option<(Vertex, BsdfSample)>,
+}
+
+impl FootprintCarrier {
+    fn new(scene: &Scene, settings: &RenderSettings, observer_wants_footprints: bool) -> Self {
+        let track = settings.footprint != FootprintMode::None
+            && ((scene.footprints_needed && !settings.free_textures) || observer_wants_footprints);
+        FootprintCarrier { track, state: PathFootprint::None, last: None }
+    }
+
+    /// The footprint at hit `si`, carried along direction `d` from the last scattering vertex
+    /// (or the camera); on the camera ray, textures are filtered around the pixel centre's hit.
+    fn arrive(
+        &self,
+        scene: &Scene,
+        settings: &RenderSettings,
+        cam: &CameraRay,
+        si: &SurfaceInteraction,
+        d: Vec3,
+    ) -> HitFootprint {
+        let vertex = if self.track { Some(si.footprint_vertex()) } else { None };
+        let (state, var) = match (&vertex, &self.last) {
+            (Some(v), None) => PathFootprint::start(settings.footprint, &scene.camera, cam, v, settings.spp),
+            (Some(v), Some((pv, bs))) => {
+                let mut state = self.state;
+                let var = state.advance(pv, bs, d, v);
+                (state, var)
+            }
+            _ => (self.state, DMat2::ZERO),
+        };
+        let shift = match (&vertex, &self.last) {
+            (Some(v), None) => first_vertex_shift(settings, cam, v),
+            _ => CentreShift::default(),
+        };
+        HitFootprint { texture: TextureFootprint { vertex, var, shift }, state }
+    }
+
+    /// The path scatters at the hit it arrived at (`here`): it keeps the footprint there.
+    fn scatter_at(&mut self, here: &HitFootprint) {
+        self.state = here.state;
+    }
+
+    /// The path left `here` by BSDF sample `bs`.
+    fn sampled(&mut self, here: &HitFootprint, bs: BsdfSample) {
+        if self.track {
+            self.last = here.texture.vertex.map(|v| (v, bs));
+        }
+    }
+}
+
+/// Where the last BSDF sample came from, for MIS on emitters the path then meets by chance.
+#[derive(Clone, Copy, Debug)]
+struct LastScatter {
+    p: Vec3,
+    /// The density the path's strategy sampled its direction with.
+    pdf: f32,
+    /// A specular (or camera) sample: emitters met are counted whole.
+    delta: bool,
+}
+
+/// What every vertex of one camera path reads and writes besides the path's own state: the
+/// scene, the render settings, the thread's texture evaluator and counters.
+struct Tracer<'a, 't, S> {
+    scene: &'a Scene,
+    settings: RenderSettings,
+    textures: &'t mut TextureEvaluator<S>,
+    counts: &'t mut RenderCounts,
+    /// Probability of picking each emitter for next-event estimation.
+    select_pdf: f32,
+}
+
+impl<'a, S: GraphSource> Tracer<'a, '_, S> {
+    /// The material's graph outputs at hit `si`, filtered over the uv footprint that `tf` gives
+    /// there; a point without a vertex, the means with `--free-textures`, nothing for a material
+    /// without graphs.
+    fn material_outputs<'s>(
+        &'s mut self,
+        material: &'a Material,
+        si: &SurfaceInteraction,
+        tf: &TextureFootprint,
+    ) -> &'s [graph::Filtered] {
+        if material.graphs.is_empty() {
+            &[]
+        } else if self.settings.free_textures {
+            &material.constant_outputs
+        } else {
+            let fp = match &tf.vertex {
+                Some(v) => {
+                    let cov = footprint::uv_covariance(tf.var, v).as_mat2() * self.settings.filter_scale_squared();
+                    let mut fp = si.graph_footprint(cov);
+                    fp.uv += tf.shift.uv;
+                    fp.geom.p += tf.shift.p;
+                    fp
+                }
+                None => si.graph_footprint(Mat2::ZERO),
+            };
+            self.textures.evaluate(&self.scene.graphs, material, &fp)
+        }
+    }
+
+    /// What a shadow ray lets through: 0 when an opaque surface blocks it, otherwise the
+    /// product of `1 − o` over the partly transparent surfaces it crosses (deterministically: no
+    /// surface is sampled as blocking, so next-event estimation stays unbiased). Each opacity is
+    /// evaluated filtered over the footprint the path would carry there, had its BSDF sampled
+    /// the light's direction (`from`: the path's footprint state at the shading point, its
+    /// vertex and [`shadow_scatter`]'s record; a point without it).
+    fn transmittance(&mut self, mut shadow: Ray, from: Option<(&PathFootprint, &Vertex, &BsdfSample)>) -> Spectrum {
+        let scene = self.scene;
+        if !scene.masked {
+            return if scene.accel.occluded(&scene.shapes, &shadow) { Spectrum::ZERO } else { Spectrum::ONE };
+        }
+        let mut tr = Spectrum::ONE;
+        for _ in 0..MAX_PASS_THROUGH {
+            let Some(hit) = scene.accel.intersect(&scene.shapes, &shadow) else {
+                return tr;
+            };
+            let material = &scene.materials[scene.shapes[hit.shape as usize].material as usize];
+            if !material.bsdf.is_masked() {
+                return Spectrum::ZERO;
+            }
+            let si = interaction(&scene.shapes, &shadow, &hit);
+            let tf = match from {
+                Some((fp, cur, bs)) if !material.graphs.is_empty() => {
+                    let v = si.footprint_vertex();
+                    let mut state = *fp;
+                    let var = state.advance(cur, bs, shadow.d, &v);
+                    TextureFootprint { vertex: Some(v), var, shift: CentreShift::default() }
+                }
+                _ => TextureFootprint::POINT,
+            };
+            let outputs = self.material_outputs(material, &si, &tf);
+            tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
+            if max_component(tr) <= 0.0 {
+                return Spectrum::ZERO;
+            }
+            shadow.tmin = past(&si, hit.t);
+            if !(shadow.tmin < shadow.tmax) {
+                return tr;
+            }
+        }
+        // As many surfaces crossed as a path may pass through: anything more blocks.
+        if scene.accel.occluded(&scene.shapes, &shadow) {
+            Spectrum::ZERO
+        } else {
+            tr
+        }
+    }
+
+    /// Next-event estimation at `si` for a path of weight `throughput`: one emitter picked at
+    /// random and sampled, its light weighed by MIS against the BSDF strategy (which samples
+    /// with `scatter_pdf` times the BSDF's density) and attenuated by the shadow ray's
+    /// transmittance. `here` is the path's footprint at `si`, whose vertex (when tracked) the
+    /// shadow ray's footprint starts from.
+    #[allow(clippy::too_many_arguments)]
+    fn direct_lighting(
+        &mut self,
+        rng: &mut Rng,
+        si: &SurfaceInteraction,
+        bsdf: &Bsdf,
+        wi: Vec3,
+        throughput: Spectrum,
+        scatter_pdf: f32,
+        here: (&PathFootprint, Option<&Vertex>),
+    ) -> Option<Spectrum> {
+        let scene = self.scene;
+        let n_emitters = scene.emitters.len();
+        let pick = ((rng.next_f32() * n_emitters as f32) as usize).min(n_emitters - 1);
+        let u = rng.next_2d();
+        let e = &scene.emitters[pick];
+        let es = e.sample(&scene.shapes, si.p, u)?;
+        let wo = si.sh.to_local(es.wi);
+        let f = bsdf.eval(wi, wo);
+        if !(es.pdf > 0.0 && max_component(f) > 0.0 && max_component(es.value) > 0.0) {
+            return None;
+        }
+        let mut shadow = spawn_ray(si, es.wi);
+        if es.dist.is_finite() {
+            shadow.tmax = es.dist - ray_epsilon(si.p + es.wi * es.dist) - (shadow.o - si.p).length();
+        }
+        self.counts.shadow_rays += 1;
+        if !(shadow.tmax > 0.0) {
+            return None;
+        }
+        let toward = match (here.1, scene.masked) {
+            (Some(v), true) => Some((v, shadow_scatter(bsdf, wi, wo))),
+            _ => None,
+        };
+        let from = toward.as_ref().map(|(v, bs)| (here.0, *v, bs));
+        let tr = self.transmittance(shadow, from);
+        if !(max_component(tr) > 0.0) {
+            return None;
+        }
+        let light_pdf = self.select_pdf * es.pdf;
+        let w = if es.delta { 1.0 } else { mis(light_pdf, scatter_pdf * bsdf.pdf(wi, wo)) };
+        Some(throughput * f * es.value * tr * (w / light_pdf))
+    }
+
+    /// The MIS weight of emitter `e`'s light met by chance along a ray from `last`, whose
+    /// density for that direction `e` gives as `emitter_pdf` per chosen emitter.
+    #[inline]
+    fn met_weight(&self, last: &LastScatter, emitter_pdf: impl FnOnce() -> f32) -> f32 {
+        if last.delta {
+            1.0
+        } else {
+            mis(last.pdf, self.select_pdf * emitter_pdf())
+        }
+    }
+}
+
+/// The material's BSDF at a hit and the shading frame it is evaluated in (bent by a
+/// graph-driven normal).
+fn shade_bsdf(material: &Material, si: &SurfaceInteraction, ctx: &ShadeContext) -> (Bsdf, Frame) {
+    let bsdf = material.bsdf.at(ctx);
+    let frame = match material.normal_slot {
+        Some(slot) => {
+            let f = &ctx.outputs[slot as usize];
+            crate::shading::perturbed_frame(&si.sh, Vec3::new(f.ch[0].mean, f.ch[1].mean, f.ch[2].mean))
+        }
+        None => si.sh,
+    };
+    (bsdf, frame)
+}
+
+/// Incident radiance along a camera ray (Mitsuba's `path` integrator), with the path's
+/// footprints tracked by `settings.footprint` and reported to `obs`.
+///
+/// Partly transparent surfaces ([`crate::bsdf::BsdfDesc::Mask`], opacity `o` per channel) are
+/// the BSDF with weight `o` plus a straight pass-through with weight `1 − o`. A camera or
+/// bounce ray picks one at random, the BSDF with probability `p` = the mean of `o`, and weighs
+/// the path by `o/p` or `(1 − o)/(1 − p)` per channel (no random number is drawn when `p` is 0
+/// or 1). Passing through continues the same ray past the hit: it is not a bounce (depth,
+/// Russian roulette and the MIS state of the last scattering vertex are untouched) and it
+/// leaves the path's footprint as if the surface were absent; the opacity itself is filtered
+/// over the current ray's footprint projected onto the surface. At most [`MAX_PASS_THROUGH`]
+/// pass-throughs in a row. Shadow rays are attenuated by `1 − o` of every such surface they
+/// cross, deterministically. For MIS, the BSDF strategy's density at a partly transparent
+/// vertex is `p` times the BSDF's (what the mixture samples), both at emitter hits and in
+/// next-event estimation. Emission of a partly transparent emitter is not masked (Mitsuba's
+/// emitters are separate from their shape's BSDF).
+pub fn radiance<S: GraphSource, O: PathObserver>(
+    scene: &Scene,
+    settings: RenderSettings,
+    cam: &CameraRay,
+    rng: &mut Rng,
+    counts: &mut RenderCounts,
+    textures: &mut TextureEvaluator<S>,
+    obs: &mut O,
+) -> Spectrum {
+    let path = scene.integrator;
+    let n_emitters = scene.emitters.len();
+    let select_pdf = if n_emitters > 0 { 1.0 / n_emitters as f32 } else { 0.0 };
+    let mut tracer = Tracer { scene, settings, textures, counts, select_pdf };
+    let mut ray = cam.ray;
+    let mut throughput = Spectrum::ONE;
+    let mut result = Spectrum::ZERO;
+    let mut eta = 1.0f32;
+    let mut depth = 0u32;
+    let mut last = LastScatter { p: ray.o, pdf: 0.0, delta: true };
+    let mut footprints = FootprintCarrier::new(scene, &settings, O::WANTS_FOOTPRINTS);
+    // Surfaces passed straight through since the last scattering vertex.
+    let mut passes = 0u32;
+    loop {
+        tracer.textures.depth = depth;
+        tracer.counts.rays += 1;
+        let Some(hit) = scene.accel.intersect(&scene.shapes, &ray) else {
+            for &ei in &scene.infinite {
+                let e = &scene.emitters[ei as usize];
+                let le = e.eval_escape(ray.d);
+                let w = tracer.met_weight(&last, || e.pdf(&scene.shapes, last.p, Vec3::ZERO, Vec3::ZERO, ray.d));
+                result += throughput * le * w;
+            }
+            obs.escape(depth, ray.d);
+            break;
+        };
+        let si = interaction(&scene.shapes, &ray, &hit);
+        let shape = &scene.shapes[si.shape as usize];
+        let material = &scene.materials[shape.material as usize];
+        // The footprint here; the path keeps it only if it scatters here.
+        let here = footprints.arrive(scene, &settings, cam, &si, ray.d);
+        if let Some(ei) = shape.emitter {
+            let e = &scene.emitters[ei as usize];
+            if let Emitter::Area { radiance, .. } = e {
+                if si.sh.n.dot(-ray.d) > 0.0 {
+                    let w = tracer.met_weight(&last, || e.pdf(&scene.shapes, last.p, si.p, si.sh.n, ray.d));
+                    result += throughput * *radiance * w;
+                }
+            }
+        }
+        // Partial opacity: scatter here (probability `p`) or pass straight through.
+        let mut scatter_pdf = 1.0f32;
+        let mut shaded = None;
+        if material.bsdf.is_masked() {
+            let outputs = tracer.material_outputs(material, &si, &here.texture);
+            let ctx = ShadeContext { uv: si.uv, outputs };
+            let o = material.bsdf.opacity(&ctx);
+            let p = (o.x + o.y + o.z) / 3.0;
+            let scatter = p >= 1.0 || (p > 0.0 && rng.next_f32() < p);
+            if !scatter {
+                throughput *= (Spectrum::ONE - o) / (1.0 - p);
+                passes += 1;
+                if passes > MAX_PASS_THROUGH || max_component(throughput) <= 0.0 {
+                    break;
+                }
+                ray.tmin = past(&si, hit.t);
+                continue;
+            }
+            if p < 1.0 {
+                throughput *= o / p;
+                scatter_pdf = p;
+            }
+            shaded = Some(shade_bsdf(material, &si, &ctx));
+        }
+        passes = 0;
+        footprints.scatter_at(&here);
+        let vertex = here.texture.vertex.as_ref();
+        obs.hit(depth, &si, vertex, here.texture.var);
+        let ended = if shape.emitter.is_some() { Event::Emit } else { Event::Absorb };
+        if depth + 1 >= path.max_depth {
+            obs.event(depth, ended, 0.0, 1.0);
+            break;
+        }
+        let (bsdf, frame) = match shaded {
+            Some(s) => s,
+            None => {
+                // Procedural textures are filtered to the vertex's uv footprint (a point without one).
+                let outputs = tracer.material_outputs(material, &si, &here.texture);
+                shade_bsdf(material, &si, &ShadeContext { uv: si.uv, outputs })
+            }
+        };
+        // A graph-driven shading normal bends the frame the BSDF is evaluated in.
+        let mut si = si;
+        si.sh = frame;
+        let wi = si.sh.to_local(-ray.d);
+
+        if n_emitters > 0 && bsdf.has_smooth() {
+            let at = (&footprints.state, vertex);
+            if let Some(l) = tracer.direct_lighting(rng, &si, &bsdf, wi, throughput, scatter_pdf, at) {
+                result += l;
+            }
+        }
+
+        // Continue the path by sampling the BSDF.
+        let u_lobe = rng.next_f32();
+        let u = rng.next_2d();
+        let Some(bs) = bsdf.sample(wi, u_lobe, u) else {
+            obs.event(depth, ended, 0.0, 1.0);
+            break;
+        };
+        if !(bs.pdf > 0.0) || !bs.weight.is_finite() || max_component(bs.weight) <= 0.0 {
+            obs.event(depth, ended, 0.0, 1.0);
+            break;
+        }
+        let event = match (bs.kind, bs.transmitted) {
+            (_, true) => Event::Refract,
+            (LobeKind::Diffuse, false) => Event::Diffuse,
+            _ => Event::Reflect,
+        };
+        obs.event(depth, event, bs.alpha, bs.eta);
+        throughput *= bs.weight;
+        eta *= bs.eta;
+        last = LastScatter { p: si.p, pdf: bs.pdf * scatter_pdf, delta: matches!(bs.kind, LobeKind::Specular) };
+        ray = spawn_ray(&si, si.sh.to_world(bs.wo));
+        depth += 1;
+        footprints.sampled(&here, bs);
+
+        if depth >= path.rr_depth {
+            let q = (max_component(throughput) * eta * eta).min(0.95);
+            if !(rng.next_f32() < q) {
+                break;
+            }
+            throughput /= q;
+        }
+    }
+    result
+}
