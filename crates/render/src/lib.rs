@@ -35,6 +35,7 @@ pub mod profiling;
 pub mod sampling;
 pub mod scene;
 pub mod shading;
+pub mod stats;
 pub mod texture;
 pub mod xml;
 

@@ -15,6 +15,7 @@ use crate::flip::{self, Srgb8};
 use crate::write_atomic;
 use anyhow::{bail, Context, Result};
 use render::film::Image;
+use render::stats::{PlanStats, RenderStats, STATS_SCHEMA};
 use serde::Serialize;
 use serde_json::Value;
 use std::collections::BTreeMap;
@@ -557,72 +558,49 @@ fn child_error(out: &std::process::Output) -> String {
     msg
 }
 
-fn num(v: &Value, path: &[&str]) -> std::result::Result<f64, String> {
-    let mut x = v;
-    for p in path {
-        x = &x[p];
-    }
-    x.as_f64().ok_or_else(|| format!("stats JSON lacks the number {}", path.join(".")))
-}
-
-fn count(v: &Value, path: &[&str]) -> std::result::Result<u64, String> {
-    num(v, path).map(|x| x.max(0.0) as u64)
-}
-
 fn parse_sample(stats: Value, image: Image, process_s: f64) -> std::result::Result<Sample, String> {
-    let plan_obj = stats.get("plan").filter(|p| p.is_object());
-    let opt = |p: Option<&Value>, k: &str| p.and_then(|p| p[k].as_f64()).unwrap_or(0.0);
+    let typed: RenderStats =
+        serde_json::from_value(stats.clone()).map_err(|e| format!("not a valid {STATS_SCHEMA} document: {e}"))?;
+    let plan = typed.plan.as_ref();
     let phases = Phases {
-        load_s: stats["phases"]["load_s"].as_f64().unwrap_or(0.0),
-        profile_s: opt(plan_obj, "profile_s"),
-        plan_s: opt(plan_obj, "plan_s"),
-        cache_setup_s: stats["phases"]["cache_setup_s"].as_f64().unwrap_or(0.0),
-        render_s: num(&stats, &["phases", "render_s"])?,
-        write_s: stats["phases"]["write_s"].as_f64().unwrap_or(0.0),
+        load_s: typed.phases.load_s,
+        profile_s: plan.map_or(0.0, |p| p.profile_s),
+        plan_s: plan.map_or(0.0, |p| p.plan_s),
+        cache_setup_s: typed.phases.cache_setup_s,
+        render_s: typed.phases.render_s,
+        write_s: typed.phases.write_s,
     };
-    let node_evaluations = stats["graphs"]
-        .as_array()
-        .map(|g| {
-            g.iter()
-                .flat_map(|g| g["nodes"].as_array().into_iter().flatten())
-                .map(|n| n["evaluations"].as_u64().unwrap_or(0))
-                .sum()
-        })
-        .unwrap_or(0);
-    let cache = match &stats["cache"] {
-        c if c.is_object() => Some(CacheCounts {
-            cached_nodes: c["cached_nodes"].as_array().map_or(0, |a| a.len() as u64),
-            budget_bytes: count(c, &["budget_bytes"])?,
-            peak_bytes: count(c, &["peak_bytes"])?,
-            lookups: count(c, &["lookups"])?,
-            tile_hits: count(c, &["tile_hits"])?,
-            tile_misses: count(c, &["tile_misses"])?,
-            tiles_filled: count(c, &["tiles_filled"])?,
-            texels_filled: count(c, &["texels_filled"])?,
-            evictions: count(c, &["evictions"])?,
-            refills: c["refills"].as_u64().unwrap_or(0),
-        }),
-        _ => None,
-    };
-    let samples = count(&stats, &["counts", "samples"])?;
+    let cache = typed.cache.as_ref().map(|c| CacheCounts {
+        cached_nodes: c.cached_nodes.len() as u64,
+        budget_bytes: c.budget_bytes,
+        peak_bytes: c.peak_bytes,
+        lookups: c.lookups,
+        tile_hits: c.tile_hits,
+        tile_misses: c.tile_misses,
+        tiles_filled: c.tiles_filled,
+        texels_filled: c.texels_filled,
+        evictions: c.evictions,
+        refills: c.refills,
+    });
+    let samples = typed.counts.samples;
     let mut sample = Sample {
         process_s,
         phases,
         samples,
-        rays: stats["counts"]["rays"].as_u64().unwrap_or(0) + stats["counts"]["shadow_rays"].as_u64().unwrap_or(0),
+        rays: typed.counts.rays + typed.counts.shadow_rays,
         samples_per_s: samples as f64 / phases.render_s.max(1e-12),
-        node_evaluations,
+        node_evaluations: typed.node_evaluations(),
         cache,
         plan: None,
         stats: Value::Null,
         image,
     };
-    sample.plan = plan_obj.map(|p| plan_comparison(p, &sample));
+    sample.plan = plan.map(|p| plan_comparison(p, &sample));
     sample.stats = stats;
     Ok(sample)
 }
 
-fn plan_comparison(plan: &Value, s: &Sample) -> PlanComparison {
+fn plan_comparison(plan: &PlanStats, s: &Sample) -> PlanComparison {
     let c = s.cache.clone().unwrap_or_default();
     let measured_values = [
         s.node_evaluations as f64,
@@ -632,22 +610,19 @@ fn plan_comparison(plan: &Value, s: &Sample) -> PlanComparison {
         c.peak_bytes as f64,
         s.phases.render_s,
     ];
+    let p = &plan.predicted;
+    let predicted_values = [p.evaluations, p.lookups, p.tiles_filled, p.texels_filled, p.peak_bytes, p.render_s];
     let mut predicted = BTreeMap::new();
     let mut measured = BTreeMap::new();
     let mut ratio = BTreeMap::new();
-    for (k, m) in PLAN_QUANTITIES.iter().zip(measured_values) {
+    for ((k, m), p) in PLAN_QUANTITIES.iter().zip(measured_values).zip(predicted_values) {
         measured.insert(k.to_string(), m);
-        if let Some(p) = plan["predicted"][k].as_f64() {
-            predicted.insert(k.to_string(), p);
-            if m > 0.0 {
-                ratio.insert(k.to_string(), p / m);
-            }
+        predicted.insert(k.to_string(), p);
+        if m > 0.0 {
+            ratio.insert(k.to_string(), p / m);
         }
     }
-    let cached_nodes = plan["cached_nodes"]
-        .as_array()
-        .map(|a| a.iter().filter_map(|n| n.as_str().map(String::from)).collect())
-        .unwrap_or_default();
+    let cached_nodes = plan.cached_nodes.clone();
     PlanComparison { profile_s: s.phases.profile_s, plan_s: s.phases.plan_s, cached_nodes, predicted, measured, ratio }
 }
 

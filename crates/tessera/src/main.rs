@@ -13,12 +13,14 @@ mod svg;
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use render::caching::{NodeCache, Strategy};
-use render::caching::render_cached;
+use render::caching::{render_cached, NodeCache, Strategy};
 use render::integrator::{RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
-use serde_json::json;
+use render::stats::{
+    CacheReport, GraphStats, NonFiniteNode, NonFiniteOrigin, NonFiniteSampleStats, NonFiniteStats, Phases,
+    RenderStats, Throughput, STATS_SCHEMA,
+};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -312,51 +314,29 @@ fn run_render(args: RenderArgs) -> Result<()> {
         eprintln!("warning: {}", nonfinite.message());
     }
     if let Some(path) = &args.stats_json {
-        let stats = json!({
-            "schema": "tessera.stats/1",
-            "scene": args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "<embedded default scene>".into()),
-            "images": outputs.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "aovs": aov_files.iter().map(|p| p.display().to_string()).collect::<Vec<_>>(),
-            "footprint": format!("{:?}", args.footprint).to_lowercase(),
-            "width": w,
-            "height": h,
-            "spp": spp,
-            "seed": seed,
-            "threads": threads,
-            "phases": { "load_s": load_s, "cache_setup_s": cache_setup_s, "render_s": render_s, "write_s": write_s },
-            "counts": {
-                "samples": c.samples,
-                "rays": c.rays,
-                "shadow_rays": c.shadow_rays,
-                "nonfinite_samples": c.nonfinite_samples,
+        let display = |p: &PathBuf| p.display().to_string();
+        let stats = RenderStats {
+            schema: STATS_SCHEMA.into(),
+            scene: args.scene.as_ref().map(display).unwrap_or_else(|| "<embedded default scene>".into()),
+            images: outputs.iter().map(display).collect(),
+            aovs: aov_files.iter().map(display).collect(),
+            footprint: format!("{:?}", args.footprint).to_lowercase(),
+            width: w,
+            height: h,
+            spp,
+            seed,
+            threads: threads as u32,
+            phases: Phases { load_s, cache_setup_s, render_s, write_s },
+            counts: (&c).into(),
+            nonfinite: nonfinite.stats(),
+            throughput: Throughput {
+                samples_per_s: c.samples as f64 / render_s,
+                rays_per_s: total_rays as f64 / render_s,
             },
-            "nonfinite": nonfinite.json(),
-            "throughput": {
-                "samples_per_s": c.samples as f64 / render_s,
-                "rays_per_s": total_rays as f64 / render_s,
-            },
-            "graphs": graph_stats_json(&scene, &out.graph_stats),
-            "plan": auto.as_ref().map(|a| a.stats_json()),
-            "cache": node_cache.as_ref().map(|nc| {
-                let st = nc.stats();
-                let t = st.total();
-                json!({
-                    "strategy": args.strategy.to_string(),
-                    "cached_nodes": nc.cached_node_names(&scene.graphs),
-                    "budget_bytes": st.budget_bytes,
-                    "peak_bytes": st.peak_bytes,
-                    "lookups": st.textures.iter().map(|x| x.lookups).sum::<u64>(),
-                    "tile_hits": t.hits,
-                    "tile_misses": t.misses,
-                    "tiles_filled": t.fills,
-                    "texels_filled": t.texels_filled,
-                    "texels_saturated": t.texels_saturated,
-                    "evictions": t.evictions,
-                    "refills": t.refills,
-                    "nodes": cache_nodes_json(nc, &scene, &st),
-                })
-            }),
-        });
+            graphs: GraphStats::of_render(&scene.graphs, &out.graph_stats),
+            plan: auto.as_ref().map(|a| a.stats()),
+            cache: node_cache.as_ref().map(|nc| CacheReport::of(nc, &scene.graphs, args.strategy.to_string())),
+        };
         write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
     }
     if let Some(a) = &auto {
@@ -374,70 +354,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
     Ok(())
 }
 
-/// Per cached node (textures are added in the order of the names) and per level it used: the
-/// cache's counters.
-fn cache_nodes_json(nc: &NodeCache, scene: &Scene, st: &cache::CacheStats) -> serde_json::Value {
-    let nodes: Vec<serde_json::Value> = nc
-        .cached_node_names(&scene.graphs)
-        .iter()
-        .zip(&st.textures)
-        .map(|(name, tex)| {
-            let levels: Vec<serde_json::Value> = tex
-                .levels
-                .iter()
-                .enumerate()
-                .filter(|(_, l)| l.requests + l.misses + l.fills > 0)
-                .map(|(i, l)| {
-                    json!({
-                        "level": i,
-                        "requests": l.requests,
-                        "hits": l.hits,
-                        "misses": l.misses,
-                        "fills": l.fills,
-                        "texels_filled": l.texels_filled,
-                        "texels_saturated": l.texels_saturated,
-                        "evictions": l.evictions,
-                        "refills": l.refills,
-                        "peak_bytes": l.peak_bytes,
-                    })
-                })
-                .collect();
-            json!({ "name": name, "lookups": tex.lookups, "levels": levels })
-        })
-        .collect();
-    serde_json::Value::Array(nodes)
-}
 
-/// Per graph: its document and, per node, the filtered evaluations the render made.
-fn graph_stats_json(scene: &Scene, stats: &[graph::EvalStats]) -> serde_json::Value {
-    let graphs: Vec<serde_json::Value> = scene
-        .graphs
-        .iter()
-        .zip(stats)
-        .map(|(sg, st)| {
-            let g = sg.graph();
-            let nodes: Vec<serde_json::Value> = g
-                .node_ids()
-                .map(|id| {
-                    json!({
-                        "name": g.node_name(id),
-                        "category": g.node_category(id),
-                        "evaluations": st.evaluations.get(id.0 as usize).copied().unwrap_or(0),
-                        "lookups": st.lookups.get(id.0 as usize).copied().unwrap_or(0),
-                        "estimated_s": st.estimated_seconds(id.0 as usize),
-                        "nonfinite": st.nonfinite.get(id.0 as usize).copied().unwrap_or(0),
-                    })
-                })
-                .collect();
-            json!({
-                "document": sg.name,
-                "nodes": nodes,
-                "work": { "octaves": st.work.octaves, "lattice": st.work.lattice },
-            })
-        })
-        .collect();
-    serde_json::Value::Array(graphs)
-}
 
 /// What a render says about values that were not finite: samples left out of their pixels
 /// (with the first ones' origins), graph nodes that gave non-finite values, and the first
@@ -502,35 +419,45 @@ impl<'a> NonFiniteReport<'a> {
         m
     }
 
-    fn json(&self) -> serde_json::Value {
+    fn stats(&self) -> NonFiniteStats {
         let scene = self.scene;
-        let sample_json = |s: &render::shading::NonFiniteSample| {
-            let origin = s.origin.as_ref().map(|o| {
+        let sample = |s: &render::shading::NonFiniteSample| NonFiniteSampleStats {
+            x: s.x,
+            y: s.y,
+            sample: s.sample,
+            origin: s.origin.as_ref().map(|o| {
                 let sg = &scene.graphs[o.graph as usize];
                 let g = sg.graph();
-                json!({
-                    "material": o.material,
-                    "graph": sg.file_name(),
-                    "node": g.node_name(o.at.node),
-                    "category": g.node_category(o.at.node),
-                    "uv": [o.at.uv.x, o.at.uv.y],
-                    "sigma": o.at.sigma,
-                    "bounce": o.bounce,
-                })
-            });
-            json!({ "x": s.x, "y": s.y, "sample": s.sample, "origin": origin })
+                NonFiniteOrigin {
+                    material: o.material.clone(),
+                    graph: sg.file_name().to_string(),
+                    node: g.node_name(o.at.node).to_string(),
+                    category: g.node_category(o.at.node).to_string(),
+                    uv: [o.at.uv.x, o.at.uv.y],
+                    sigma: o.at.sigma,
+                    bounce: o.bounce,
+                }
+            }),
         };
-        let first: Vec<serde_json::Value> = self.out.nonfinite.iter().map(sample_json).collect();
-        let values: Vec<serde_json::Value> = self.out.graph_nonfinite.iter().map(sample_json).collect();
-        let nodes: Vec<serde_json::Value> = self
+        let nodes = self
             .nodes
             .iter()
-            .map(|&(gi, id, n)| {
+            .map(|&(gi, id, count)| {
                 let sg = &scene.graphs[gi];
-                json!({ "graph": sg.file_name(), "node": sg.graph().node_name(id), "category": sg.graph().node_category(id), "count": n })
+                NonFiniteNode {
+                    graph: sg.file_name().to_string(),
+                    node: sg.graph().node_name(id).to_string(),
+                    category: sg.graph().node_category(id).to_string(),
+                    count,
+                }
             })
             .collect();
-        json!({ "samples": self.out.counts.nonfinite_samples, "first": first, "nodes": nodes, "values": values })
+        NonFiniteStats {
+            samples: self.out.counts.nonfinite_samples,
+            first: self.out.nonfinite.iter().map(sample).collect(),
+            nodes,
+            values: self.out.graph_nonfinite.iter().map(sample).collect(),
+        }
     }
 }
 

@@ -7,7 +7,7 @@ use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, Search
 use render::integrator::{FilterScale, RenderSettings};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
-use serde_json::json;
+use render::stats::{RenderStats, STATS_SCHEMA};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -184,26 +184,16 @@ impl Measured {
     }
 
     /// From a `tessera.stats/1` document.
-    pub fn from_stats(v: &serde_json::Value) -> Measured {
-        let f = |p: &str| v.pointer(p).and_then(|x| x.as_f64()).unwrap_or(0.0);
-        let evaluations = v
-            .get("graphs")
-            .and_then(|g| g.as_array())
-            .map(|gs| {
-                gs.iter()
-                    .flat_map(|g| g["nodes"].as_array().cloned().unwrap_or_default())
-                    .map(|n| n["evaluations"].as_f64().unwrap_or(0.0))
-                    .sum()
-            })
-            .unwrap_or(0.0);
-        Measured {
-            evaluations,
-            lookups: f("/cache/lookups"),
-            tiles_filled: f("/cache/tiles_filled"),
-            texels_filled: f("/cache/texels_filled"),
-            peak_bytes: f("/cache/peak_bytes"),
-            render_s: f("/phases/render_s"),
+    pub fn from_stats(v: &RenderStats) -> Measured {
+        let mut m =
+            Measured { evaluations: v.node_evaluations() as f64, render_s: v.phases.render_s, ..Measured::default() };
+        if let Some(c) = &v.cache {
+            m.lookups = c.lookups as f64;
+            m.tiles_filled = c.tiles_filled as f64;
+            m.texels_filled = c.texels_filled as f64;
+            m.peak_bytes = c.peak_bytes as f64;
         }
+        m
     }
 }
 
@@ -366,24 +356,19 @@ pub fn standard_rows(profile: &Profile, plan: &PlanSpec) -> Vec<(String, PlanSpe
 }
 
 /// The plan a measured render used: its cached node names (and thresholds of an auto plan).
-fn spec_of_stats(profile: &Profile, v: &serde_json::Value) -> Result<PlanSpec> {
+fn spec_of_stats(profile: &Profile, v: &RenderStats) -> Result<PlanSpec> {
     let mut spec = PlanSpec::none(profile);
-    let names: Vec<&str> = v
-        .pointer("/cache/cached_nodes")
-        .and_then(|x| x.as_array())
-        .map(|a| a.iter().filter_map(|n| n.as_str()).collect())
-        .unwrap_or_default();
+    let names = v.cache.as_ref().map(|c| c.cached_nodes.as_slice()).unwrap_or_default();
     for name in names {
         let mut found = false;
         for (g, graph) in profile.graphs.iter().enumerate() {
-            if let Some(n) = graph.nodes.iter().position(|n| n.name == name) {
+            if let Some(n) = graph.nodes.iter().position(|n| n.name == *name) {
                 let min = v
-                    .pointer("/plan/nodes")
-                    .and_then(|x| x.as_array())
-                    .and_then(|a| a.iter().find(|p| p["node"].as_str() == Some(name)))
-                    .and_then(|p| p["min_level"].as_u64())
-                    .unwrap_or(0);
-                spec.cached[g][n] = Some(min as u8);
+                    .plan
+                    .as_ref()
+                    .and_then(|p| p.nodes.iter().find(|p| p.node == *name))
+                    .map_or(0, |p| p.min_level);
+                spec.cached[g][n] = Some(min);
                 found = true;
             }
         }
@@ -392,6 +377,15 @@ fn spec_of_stats(profile: &Profile, v: &serde_json::Value) -> Result<PlanSpec> {
         }
     }
     Ok(spec)
+}
+
+/// A `tessera.stats/1` document read from `path` (its text `text`).
+pub fn read_stats(path: &Path, text: &str) -> Result<RenderStats> {
+    let v: serde_json::Value = serde_json::from_str(text).with_context(|| format!("{}: not JSON", path.display()))?;
+    if v["schema"] != STATS_SCHEMA {
+        bail!("{}: not a {STATS_SCHEMA} document", path.display());
+    }
+    serde_json::from_value(v).with_context(|| format!("{}: not a valid {STATS_SCHEMA} document", path.display()))
 }
 
 /// `tessera analyze`.
@@ -413,17 +407,11 @@ pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
     let mut rows = Vec::new();
     for m in &args.measured {
         let text = std::fs::read_to_string(m).with_context(|| format!("{}: cannot read", m.display()))?;
-        let v: serde_json::Value = serde_json::from_str(&text).with_context(|| format!("{}: not JSON", m.display()))?;
-        if v["schema"] != "tessera.stats/1" {
-            bail!("{}: not a tessera.stats/1 document", m.display());
-        }
+        let v = read_stats(m, &text)?;
         let spec = spec_of_stats(&profile, &v).with_context(|| format!("{}", m.display()))?;
-        let t = Target {
-            samples: v.pointer("/counts/samples").and_then(|x| x.as_u64()).unwrap_or(target.samples).max(1),
-            threads: v["threads"].as_u64().map_or(target.threads, |t| t as u32),
-        };
+        let t = Target { samples: v.counts.samples.max(1), threads: v.threads.max(1) };
         let pred = Model::new(&profile, t)?.predict(&spec);
-        let name = v.pointer("/cache/strategy").and_then(|s| s.as_str()).unwrap_or("none").to_string();
+        let name = v.cache.as_ref().map_or("none", |c| c.strategy.as_str()).to_string();
         rows.push((name, pred, Measured::from_stats(&v)));
     }
     if !rows.is_empty() {
@@ -625,18 +613,18 @@ impl AutoPlan {
     }
 
     /// The `"plan"` object of the stats JSON.
-    pub fn stats_json(&self) -> serde_json::Value {
-        json!({
-            "strategy": "auto",
-            "profile_s": self.profile_s,
-            "plan_s": self.plan_s,
-            "profile_samples": self.profile.render.samples,
-            "method": self.result.method,
-            "candidates": self.result.candidates,
-            "plans_evaluated": self.result.plans_evaluated,
-            "cached_nodes": self.file.nodes.iter().map(|n| n.node.clone()).collect::<Vec<_>>(),
-            "nodes": self.file.nodes,
-            "predicted": self.file.predicted,
-        })
+    pub fn stats(&self) -> render::stats::PlanStats {
+        render::stats::PlanStats {
+            strategy: "auto".into(),
+            profile_s: self.profile_s,
+            plan_s: self.plan_s,
+            profile_samples: self.profile.render.samples,
+            method: self.result.method.clone(),
+            candidates: self.result.candidates as u64,
+            plans_evaluated: self.result.plans_evaluated,
+            cached_nodes: self.file.nodes.iter().map(|n| n.node.clone()).collect(),
+            nodes: self.file.nodes.clone(),
+            predicted: self.file.predicted,
+        }
     }
 }
