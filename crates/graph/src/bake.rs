@@ -1,5 +1,5 @@
 //! Baking: a graph output evaluated on a grid of texels over a uv rectangle. This is the core of
-//! `tessera bake` and of the MaterialX conformance runner (`tests/suite.rs`), which therefore
+//! `tessera bake` and of the MaterialX conformance runner (`tests/verify/suite.rs`), which therefore
 //! check the same code.
 //!
 //! # Grid and orientation

@@ -35,7 +35,7 @@
 //! rules the families share (overflow saturates to ±`f32::MAX`, the moment algebra in
 //! [`moments`] redoes in f64 what overflows f32, division by zero is 0, `power` is OSL's `safe_pow`, Perlin noise is
 //! 0 where f32 coordinates are whole numbers, fractal octaves stop where their amplitude or
-//! frequency overflows) are listed in the README; `tests/random_graphs.rs` fuzzes them. Should a
+//! frequency overflows) are listed in the README; `tests/verify/random_graphs.rs` fuzzes them. Should a
 //! value still go non-finite, the evaluator records the node it started at
 //! ([`EvalScratch::take_nonfinite`], [`EvalStats::nonfinite`]).
 //!
@@ -48,7 +48,7 @@
 //!
 //! [`bake`] evaluates one output on a grid of texels over a uv rectangle (point or one-texel
 //! filtered, in MaterialX's or Mitsuba's row order): what `tessera bake` writes and what the
-//! MaterialX conformance test (`tests/suite.rs`) compares with MaterialX's own bakes.
+//! MaterialX conformance test (`tests/verify/suite.rs`) compares with MaterialX's own bakes.
 //!
 //! ```
 //! use graph::{Document, Footprint, EvalScratch, LoadOptions};

@@ -8,9 +8,7 @@
 //! arithmetic (its `fract` of products near 10⁴ keeps ~3 decimals in f32; an f64 hash would
 //! be a different random pattern).
 
-mod common;
-
-use common::Rng;
+use crate::common::{self, Rng};
 use glam::{Mat2, Vec2};
 use graph::{Document, EvalScratch, Footprint, Graph, LoadErrorKind, LoadOptions};
 use std::path::{Path, PathBuf};
@@ -476,7 +474,7 @@ fn filtered_matches_supersampling() {
         "filtering/hextile.md",
         &format!(
             "# `hextiledimage` filtered against supersampling\n\n\
-             Written by `crates/graph/tests/hextile.rs` (`filtered_matches_supersampling`); cells as \
+             Written by `crates/graph/tests/verify/hextile.rs` (`filtered_matches_supersampling`); cells as \
              in `nodes.md` (12 centres, 2048 samples each). Asserted: at σ ≤ 1e-4 the filtered \
              error is below 1e-4; at σ ≥ 1e-3, where point sampling errs by more than 0.01, the \
              ratio is below 0.3; beyond three hex tiles the error is below 0.02; the reported \

@@ -13,11 +13,10 @@
 //! each kind instead (`TESSERA_FUZZ_SEED` picks another seed); a long run writes its table to
 //! `docs/filtering/random-graphs-long.md`.
 
-mod common;
 #[path = "common/fuzz.rs"]
 mod fuzz;
 
-use common::Rng;
+use crate::common::{self, Rng};
 use glam::Vec2;
 use graph::{EvalScratch, Filtered, Footprint, Graph, NoOverride, OutputId};
 use rayon::prelude::*;
@@ -364,8 +363,8 @@ fn random_graphs_are_total_and_agree_with_supersampling() {
     println!("{summary}, {:.1} s\n{table}", t0.elapsed().as_secs_f64());
     let doc = format!(
         "# Random graphs: filtered error against supersampling\n\n\
-         Written by `cargo test -p graph --release --test random_graphs` ({}).\n\n\
-         Graphs of 2–40 nodes drawn from the continuous nodes of the library (`tests/common/fuzz.rs`: \
+         Written by `cargo test -p graph --release --test verify random_graphs::` ({}).\n\n\
+         Graphs of 2–40 nodes drawn from the continuous nodes of the library (`tests/verify/common/fuzz.rs`: \
          `CONTINUOUS`), with random type-respecting wiring and random constants (0, ±1e-7, ±1e6, \
          negative where a node's natural range is positive, …), at random footprints (σ log-uniform in \
          [1e-7, 1e3] uv, aspect up to 1e4 or rank one, random orientation). Each cell is the \

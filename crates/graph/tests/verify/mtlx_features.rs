@@ -2,8 +2,7 @@
 //! any depth, version upgrades, includes, file prefixes, colour spaces, uniform and enum inputs;
 //! and the errors bad documents give (each naming its file and line).
 
-mod common;
-
+use crate::common;
 use glam::Vec2;
 use graph::{Document, EvalScratch, Footprint, LoadError, LoadErrorKind, LoadOptions, MaterialSource};
 use std::path::{Path, PathBuf};

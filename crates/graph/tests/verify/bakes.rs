@@ -1,7 +1,6 @@
 //! Unfiltered evaluation against MaterialX 1.39.5's own GLSL bakes of `patterns.mtlx`.
 
-mod common;
-
+use crate::common;
 use graph::bake::{self, BakeSettings};
 use graph::Document;
 

@@ -3,8 +3,8 @@
 //! physical range at points and at footprints from sub-texel to whole-object, the patterns are
 //! not degenerate, and the scenes (`scenes/*.xml`) only name materials and outputs that exist.
 //!
-//! Two diagnostics are `#[ignore]`d (run them with `cargo test --release -p graph --test
-//! demo_graphs -- --ignored --nocapture NAME`):
+//! Two diagnostics are `#[ignore]`d (run them with `cargo test --release -p graph --test verify
+//! -- --ignored --nocapture demo_graphs::NAME`):
 //! - `preview` writes PPM swatches of the outputs (left half point-sampled, right half filtered)
 //!   and a view of the wood floor through wood_floor.xml's camera, point-sampled and filtered to
 //!   each pixel's ray-differential footprint, to `target/demo_previews/`;
@@ -15,8 +15,7 @@
 // Channel loops index several per-channel arrays at once.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-
+use crate::common;
 use glam::{Mat2, Vec2, Vec3};
 use graph::{Document, EvalScratch, Filtered, Footprint, Graph, MaterialSource, OutputId, Source, ValueType};
 use std::path::{Path, PathBuf};
@@ -312,7 +311,7 @@ fn demo_graphs_filtered_match_supersampling() {
         "filtering/demo-graphs.md",
         &format!(
             "# The demo graphs filtered against supersampling\n\n\
-             Written by `crates/graph/tests/demo_graphs.rs` (`demo_graphs_filtered_match_supersampling`): \
+             Written by `crates/graph/tests/verify/demo_graphs.rs` (`demo_graphs_filtered_match_supersampling`): \
              every output of the demo scenes' documents (`scenes/*.mtlx`). Each cell: mean absolute \
              error of the filtered value / of point sampling (the unfiltered value at the centre), both \
              against the mean of 2048 unfiltered values over the Gaussian footprint, over 12 random \

@@ -1,4 +1,4 @@
-//! A random-graph generator for the totality fuzzer (`tests/random_graphs.rs`): graphs drawn from
+//! A random-graph generator for the totality fuzzer (`tests/verify/random_graphs.rs`): graphs drawn from
 //! the whole node library with type-respecting random wiring and random (often extreme)
 //! constants, and random footprints from a point to 1e3 uv, rank one or anisotropic up to 1e4.
 //!

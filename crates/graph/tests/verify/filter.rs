@@ -7,9 +7,7 @@
 //! error of the filtered value and of point sampling (the unfiltered value at the centre), both
 //! against the reference, per channel.
 
-mod common;
-
-use common::{Rng, SweepRow};
+use crate::common::{self, Rng, SweepRow};
 use glam::{Mat2, Vec2};
 use graph::{Document, EvalScratch, Footprint, Graph, LoadOptions, OutputId};
 
@@ -326,7 +324,7 @@ fn filtered_matches_supersampling() {
         "filtering/nodes.md",
         &format!(
             "# Filtered evaluation per node against supersampling\n\n\
-             Written by `crates/graph/tests/filter.rs` (`filtered_matches_supersampling`). Each cell: \
+             Written by `crates/graph/tests/verify/filter.rs` (`filtered_matches_supersampling`). Each cell: \
              mean absolute error of the filtered value / of point sampling (the unfiltered value at \
              the footprint's centre), both against the mean of {SAMPLES} unfiltered values over the \
              Gaussian footprint, over {CENTRES} random centres in [-2, 2]² and all channels; in \
@@ -416,7 +414,7 @@ fn filtered_images_match_supersampling() {
         "filtering/images.md",
         &format!(
             "# Filtered image lookups against supersampling\n\n\
-             Written by `crates/graph/tests/filter.rs` (`filtered_images_match_supersampling`), on a \
+             Written by `crates/graph/tests/verify/filter.rs` (`filtered_images_match_supersampling`), on a \
              48 × 32 test image of ramps and texel noise; cells as in `nodes.md`. Asserted: at \
              σ ≤ 1e-4 the filtered error is below 2e-3; at σ ≥ 0.01, where point sampling errs by \
              more than 0.01, the ratio is below 0.3.\n\n{}",

@@ -6,9 +6,7 @@
 // Channel loops index several per-channel arrays at once.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
-
-use common::Rng;
+use crate::common::Rng;
 use glam::{Mat2, Vec2, Vec3};
 use graph::{Document, EvalScratch, Footprint, Geometry, Graph, LoadOptions, OutputId};
 

@@ -1,8 +1,7 @@
 //! The evaluator API the renderer and the tile cache rely on: overrides, direct node
 //! evaluation, plans, statistics, material bindings.
 
-mod common;
-
+use crate::common;
 use glam::{Mat2, Vec2};
 use graph::{
     Document, EvalScratch, EvalStats, Filtered, Footprint, Graph, LoadOptions, MaterialSource, NoOverride, NodeId,

@@ -1,0 +1,410 @@
+//! The importer's second pass: every node, output, shader and material built into the graph.
+
+use super::color::Transfer;
+use super::document::{ShaderDef, ShaderExtras, ShaderInput};
+use super::importer::{merge_soft, qualify, Fail, Importer, State};
+use super::nodedef::DefKind;
+use super::shading::{gltf_alpha_cutoff, gltf_alpha_mode};
+use crate::error::{BuildError, LoadError, LoadErrorKind};
+use crate::graph::{OutputId, Source};
+use crate::matrix::Matrix;
+use crate::nodes::{self, channel, Param};
+use crate::value::{Value, ValueType};
+use roxmltree::Node as XNode;
+
+impl<'a, 'i> Importer<'a, 'i> {
+    pub(super) fn build_all(&mut self) -> Result<(), LoadError> {
+        let content_scopes = self.scopes.len();
+        // Every node, so that every node is validated.
+        for scope in 0..content_scopes {
+            let mut names: Vec<(&'a str, (usize, usize))> =
+                self.scopes[scope].nodes.iter().map(|(n, e)| (*n, (self.doc_index(*e), e.range().start))).collect();
+            names.sort_by_key(|(_, p)| *p);
+            for (n, _) in names {
+                let el = self.scopes[scope].nodes[n];
+                // Matrices are folded at load, not added to the graph: fold to check them.
+                if let Some(size) = self.type_name(el).and_then(Matrix::size_of_type) {
+                    match self.fold_matrix(scope, el, size, 0) {
+                        Ok(_) | Err(Fail::Soft(_)) => {}
+                        Err(Fail::Hard(e)) => return Err(e),
+                    }
+                    continue;
+                }
+                let outs: Vec<Option<&'a str>> = match self.resolve_def(scope, el) {
+                    Ok(DefKind::Custom(k)) => self.nodedefs[k].outputs.iter().map(|(o, _)| Some(*o)).collect(),
+                    Ok(_) => vec![None],
+                    Err(Fail::Hard(e)) => return Err(e),
+                    Err(Fail::Soft(_)) => continue,
+                };
+                for o in outs {
+                    match self.node_output(scope, n, o, el) {
+                        Ok(_) | Err(Fail::Soft(_)) => {}
+                        Err(Fail::Hard(e)) => return Err(e),
+                    }
+                }
+            }
+        }
+        // Outputs.
+        for scope in 0..content_scopes {
+            let outs = self.scopes[scope].outputs.clone();
+            for o in outs {
+                let name = qualify(&self.scopes[scope].prefix, self.name_of(o)?);
+                let Some(tyname) = self.type_name(o) else {
+                    return Err(self.err(o, LoadErrorKind::Structure("<output> has no type attribute".into())));
+                };
+                let Some(ty) = ValueType::from_name(tyname) else { continue };
+                match self.output_source(scope, o) {
+                    Ok(src) => {
+                        let found = self.builder.source_type(&src);
+                        if found.channels() != ty.channels() {
+                            return Err(self.err(
+                                o,
+                                LoadErrorKind::Build(BuildError::TypeMismatch {
+                                    node: name,
+                                    input: "output".into(),
+                                    expected: ty.name().into(),
+                                    found,
+                                }),
+                            ));
+                        }
+                        self.builder.add_output(&name, ty, src).map_err(|e| self.err(o, e.into()))?;
+                    }
+                    Err(Fail::Soft(ix)) => {
+                        let r = self.reason(&ix);
+                        self.skipped.push((name, r));
+                    }
+                    Err(Fail::Hard(e)) => return Err(e),
+                }
+            }
+        }
+        // Shaders and materials.
+        for (scope, el) in self.shader_elems.clone() {
+            let sname = self.name_of(el)?.to_string();
+            let category = match el.tag_name().name() {
+                "shaderref" => el.attribute("node").unwrap_or("shaderref").to_string(),
+                c => c.to_string(),
+            };
+            let mut inputs = Vec::new();
+            for inp in self.inputs_of(el) {
+                let iname = self.name_of(inp)?.to_string();
+                let connected = inp.attribute("nodename").is_some()
+                    || inp.attribute("nodegraph").is_some()
+                    || inp.attribute("interfacename").is_some();
+                // A connection to a nodegraph output binds that output itself.
+                let existing = inp.attribute("nodegraph").and_then(|g| {
+                    let sc = self.graph_scopes.get(g).map(|&s| &self.scopes[s])?;
+                    let o = match inp.attribute("output") {
+                        Some(o) => o,
+                        None => sc.outputs.first().and_then(|o| o.attribute("name"))?,
+                    };
+                    self.builder.output_id(&qualify(g, o))
+                });
+                let si = if let Some(id) = existing {
+                    ShaderInput::Output(Ok(id))
+                } else if connected {
+                    // Shaders in different graphs may share a name: qualify by the scope.
+                    let out_name = qualify(&self.scopes[scope].prefix, &format!("{sname}.{iname}"));
+                    let res = match self.input_source(scope, inp) {
+                        Ok(Some(src)) => {
+                            let ty = self.builder.source_type(&src);
+                            self.shader_outputs.insert(out_name.clone());
+                            Ok(self.builder.add_output(&out_name, ty, src).map_err(|e| self.err(inp, e.into()))?)
+                        }
+                        Ok(None) => Err("unconnected".to_string()),
+                        Err(Fail::Soft(ix)) => Err(self.reason(&ix)),
+                        Err(Fail::Hard(e)) => return Err(e),
+                    };
+                    ShaderInput::Output(res)
+                } else {
+                    let ty = match self.type_name(inp) {
+                        Some(t) => ValueType::from_name(t),
+                        None => {
+                            return Err(self.err(inp, LoadErrorKind::Structure("<input> has no type attribute".into())))
+                        }
+                    };
+                    let v = match (ty, inp.attribute("value")) {
+                        (Some(t), Some(text)) => match self.typed_value(inp, t, text) {
+                            Ok(v) => Some(v),
+                            Err(Fail::Hard(e)) => return Err(e),
+                            Err(Fail::Soft(_)) => None,
+                        },
+                        _ => None,
+                    };
+                    ShaderInput::Value(v)
+                };
+                inputs.push((iname, si));
+            }
+            let extras = if category == "gltf_pbr" {
+                ShaderExtras { alpha_mask: self.gltf_alpha_mask(scope, el, &sname, &inputs)? }
+            } else {
+                ShaderExtras::default()
+            };
+            let location = self.loc(el);
+            self.shaders.push(ShaderDef { name: sname, category, inputs, extras, location });
+        }
+        for el in self.material_elems.clone() {
+            let mname = self.name_of(el)?.to_string();
+            for inp in self.inputs_of(el) {
+                if inp.attribute("name") == Some("surfaceshader") {
+                    if let Some(s) = inp.attribute("nodename") {
+                        self.materials.push((mname.clone(), s.to_string()));
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// For a `gltf_pbr` in MASK mode whose `alpha` is connected: adds `ifgreatereq(alpha,
+    /// alpha_cutoff, 1, 0)` to the graph as output `<shader>.alpha_mask` (a shader-input
+    /// output) and returns it; `None` for other modes and for constant alphas, which
+    /// [`Document::material`] thresholds itself.
+    ///
+    /// [`Document::material`]: super::Document::material
+    fn gltf_alpha_mask(
+        &mut self,
+        scope: usize,
+        el: XNode<'a, 'i>,
+        sname: &str,
+        inputs: &[(String, ShaderInput)],
+    ) -> Result<Option<Result<OutputId, String>>, LoadError> {
+        let lookup = |n: &str| inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
+        if gltf_alpha_mode(lookup("alpha_mode")) != Ok(1)
+            || !matches!(lookup("alpha"), Some(ShaderInput::Output(Ok(_))))
+        {
+            return Ok(None);
+        }
+        let cutoff = gltf_alpha_cutoff(lookup("alpha_cutoff")).unwrap_or(0.5);
+        let Some(inp) = self.inputs_of(el).into_iter().find(|i| i.attribute("name") == Some("alpha")) else {
+            return Ok(None);
+        };
+        let src = match self.input_source(scope, inp) {
+            Ok(Some(s)) => s,
+            Ok(None) => return Ok(Some(Err("unconnected".into()))),
+            Err(Fail::Soft(ix)) => return Ok(Some(Err(self.reason(&ix)))),
+            Err(Fail::Hard(e)) => return Err(e),
+        };
+        let name = qualify(&self.scopes[scope].prefix, &format!("{sname}.alpha_mask"));
+        let one = |v: f32| Source::Constant(Value::float(v));
+        let node = match self.builder.add_node(
+            &name,
+            "ifgreatereq",
+            ValueType::Float,
+            &[("value1", src), ("value2", one(cutoff)), ("in1", one(1.0)), ("in2", one(0.0))],
+            Vec::new(),
+        ) {
+            Ok(id) => id,
+            Err(e) => return Ok(Some(Err(e.to_string()))),
+        };
+        self.shader_outputs.insert(name.clone());
+        let out = self
+            .builder
+            .add_output(&name, ValueType::Float, Source::Node { node, channel: None })
+            .map_err(|e| self.err(inp, e.into()))?;
+        Ok(Some(Ok(out)))
+    }
+
+    /// Output `output` (or the default one) of node `name` in `scope`.
+    pub(super) fn node_output(
+        &mut self,
+        scope: usize,
+        name: &'a str,
+        output: Option<&'a str>,
+        at: XNode<'a, 'i>,
+    ) -> Result<Source, Fail> {
+        let el = self.scopes[scope].nodes[name];
+        if let DefKind::Custom(k) = self.resolve_def(scope, el)? {
+            return self.instance_output(scope, name, el, k, output, at);
+        }
+        let src = self.node(scope, name)?;
+        match (output, &src) {
+            (Some(o), Source::Node { node, channel: None })
+                if self.builder.node_category(*node).starts_with("separate") =>
+            {
+                let n = self.builder.node_type(*node).channels();
+                match channel::output_channel(o).filter(|c| (*c as usize) < n) {
+                    Some(c) => Ok(Source::Node { node: *node, channel: Some(c) }),
+                    None => {
+                        let from = qualify(&self.scopes[scope].prefix, at.attribute("name").unwrap_or("?"));
+                        let to = format!("{}.{o}", qualify(&self.scopes[scope].prefix, name));
+                        Err(self.hard(at, LoadErrorKind::Dangling { from, to }))
+                    }
+                }
+            }
+            _ => Ok(src),
+        }
+    }
+
+    /// Creates (once) the library node called `name` in `scope`, and everything upstream of it.
+    fn node(&mut self, scope: usize, name: &'a str) -> Result<Source, Fail> {
+        let q = qualify(&self.scopes[scope].prefix, name);
+        let el = self.scopes[scope].nodes[name];
+        match self.state.get(&q) {
+            Some(State::Done(s)) => return Ok(s.clone()),
+            Some(State::Visiting) => return Err(self.hard(el, LoadErrorKind::Cycle(q))),
+            None => {}
+        }
+        if let Some(r) = self.soft.get(&q) {
+            return Err(Fail::Soft(r.clone()));
+        }
+        self.state.insert(q.clone(), State::Visiting);
+        let r = self.make_node(scope, &q, el);
+        self.state.remove(&q);
+        match r {
+            Ok(s) => {
+                self.state.insert(q, State::Done(s.clone()));
+                Ok(s)
+            }
+            Err(Fail::Soft(ix)) => {
+                self.soft.insert(q, ix.clone());
+                Err(Fail::Soft(ix))
+            }
+            Err(e) => Err(e),
+        }
+    }
+
+    fn make_node(&mut self, scope: usize, q: &str, el: XNode<'a, 'i>) -> Result<Source, Fail> {
+        let category = self.category(el);
+        let tyname = self.type_name(el).unwrap_or("");
+        if category == "swizzle" && self.version(el) < (1, 39) {
+            return self.legacy_swizzle(scope, q, el);
+        }
+        if let Some(src) = self.matrix_reader(scope, q, el, category)? {
+            return Ok(src);
+        }
+        let kind = self.resolve_def(scope, el)?;
+        let def = match (kind, nodes::definition(category)) {
+            (DefKind::Builtin, Some(def)) => def,
+            (kind, _) => {
+                // Still visit the inputs, to report every unsupported node upstream too.
+                let mut soft = Vec::new();
+                for inp in self.inputs_of(el) {
+                    if let Err(f) = self.input_source(scope, inp) {
+                        merge_soft(&mut soft, f)?;
+                    }
+                }
+                let detail = match kind {
+                    DefKind::Unimplemented(k) => {
+                        format!("nodedef `{}` has no nodegraph implementation", self.nodedefs[k].name)
+                    }
+                    _ => String::new(),
+                };
+                let Fail::Soft(me) = self.unsupported(category, q, detail, el) else { unreachable!() };
+                soft.extend(me);
+                soft.sort_unstable();
+                soft.dedup();
+                return Err(Fail::Soft(soft));
+            }
+        };
+        let mut inputs: Vec<(&'static str, Source)> = Vec::new();
+        let mut params: Vec<Param> = Vec::new();
+        let mut in_type = None;
+        let mut soft: Vec<usize> = Vec::new();
+        let mut conversion = None;
+        for inp in self.inputs_of(el) {
+            let iname = self.input_name(el, category, inp);
+            if let Some(n) = self.type_name(inp).and_then(Matrix::size_of_type) {
+                match self.matrix_input(scope, inp, n, 0) {
+                    Ok(Some(value)) => params.push(Param::Matrix { name: iname.to_string(), value }),
+                    Ok(None) => {}
+                    Err(f) => merge_soft(&mut soft, f)?,
+                }
+                continue;
+            }
+            if let Some(p) = def.params.iter().find(|p| **p == iname) {
+                // A string input may take its value from an interface.
+                let src = match inp.attribute("interfacename") {
+                    Some(i) => self.interface_binding(scope, i, inp)?.map(|(e, _)| e).unwrap_or(inp),
+                    None => inp,
+                };
+                let value = src.attribute("value").unwrap_or("").to_string();
+                if inp.attribute("type") == Some("filename") || src.attribute("type") == Some("filename") {
+                    let path = self.resolve_file(src, &value)?;
+                    // Only colour images are colour managed (as in MaterialX).
+                    let mut colorspace = String::new();
+                    if matches!(ValueType::from_name(tyname), Some(ValueType::Color3 | ValueType::Color4)) {
+                        // The file input's own colour space, the interface input's, else inherited.
+                        if let Some(c) = self.conversion(&[inp, src], inp)? {
+                            if c.transfer == Transfer::Srgb {
+                                colorspace = "srgb_texture".to_string();
+                            }
+                            conversion = Some(c);
+                        }
+                    }
+                    params.push(Param::File { name: p.to_string(), path, colorspace });
+                } else {
+                    params.push(Param::Str { name: p.to_string(), value });
+                }
+                continue;
+            }
+            // Before 1.39 a normal map's frame inputs were literals; 1.39's upgrade drops the
+            // unbound ones in favour of the geometric frame.
+            if category == "normalmap"
+                && self.version(el) < (1, 39)
+                && matches!(iname, "normal" | "tangent" | "bitangent")
+                && ["nodename", "nodegraph", "interfacename"].iter().all(|a| inp.attribute(*a).is_none())
+            {
+                continue;
+            }
+            let Some(spec) = def.inputs.iter().find(|s| s.name == iname) else {
+                let f = self.unsupported(category, q, format!("input `{iname}`"), inp);
+                merge_soft(&mut soft, f)?;
+                continue;
+            };
+            match self.input_source(scope, inp) {
+                Ok(Some(src)) => {
+                    if spec.name == "in" {
+                        in_type = Some(self.builder.source_type(&src));
+                    }
+                    inputs.push((spec.name, src));
+                }
+                Ok(None) => {
+                    if spec.name == "in" {
+                        in_type = self.value_type(inp);
+                    }
+                }
+                Err(f) => merge_soft(&mut soft, f)?,
+            }
+        }
+        let ty = if tyname == "multioutput" {
+            in_type.or_else(|| {
+                self.inputs_of(el)
+                    .into_iter()
+                    .find(|c| c.attribute("name") == Some("in"))
+                    .and_then(|c| self.value_type(c))
+            })
+        } else {
+            ValueType::from_name(tyname)
+        };
+        let Some(ty) = ty else {
+            let f = self.unsupported(category, q, format!("type `{tyname}`"), el);
+            merge_soft(&mut soft, f)?;
+            return Err(Fail::Soft(soft));
+        };
+        if !soft.is_empty() {
+            return Err(Fail::Soft(soft));
+        }
+        // Before 1.39 a switch had five inputs, the fifth taken from `which` ≥ 4 on; 1.39 has
+        // ten. Feeding the fifth's source to the new five keeps the old choice.
+        if category == "switch" && self.version(el) < (1, 39) {
+            let fifth = inputs.iter().find(|(n, _)| *n == "in5").map(|(_, s)| s.clone());
+            let fifth = fifth.unwrap_or_else(|| Source::Constant(Value::splat(ty, 0.0)));
+            for name in ["in6", "in7", "in8", "in9", "in10"] {
+                inputs.retain(|(n, _)| *n != name);
+                inputs.push((name, fifth.clone()));
+            }
+        }
+        let id = match self.builder.add_node(q, category, ty, &inputs, params) {
+            Ok(id) => id,
+            Err(BuildError::UnsupportedType { .. }) => {
+                return Err(self.unsupported(category, q, format!("type `{tyname}`"), el));
+            }
+            Err(e) => return Err(self.hard(el, e.into())),
+        };
+        let src = Source::Node { node: id, channel: None };
+        match conversion {
+            Some(c) => self.convert_colors(q, src, ty, &c, el),
+            None => Ok(src),
+        }
+    }
+}

@@ -1,0 +1,19 @@
+//! The graph crate's integration tests, one module per subject, linked as one test binary: one
+//! link of the crate and its dependencies for the whole suite instead of one per file.
+
+mod api;
+mod bakes;
+mod common;
+mod cost;
+mod demo_graphs;
+mod errors;
+mod filter;
+mod finite;
+mod geometry;
+mod hextile;
+mod logic;
+mod mtlx_features;
+mod ramp;
+mod random_graphs;
+mod shading_models;
+mod suite;
