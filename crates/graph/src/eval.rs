@@ -263,6 +263,29 @@ impl EvalScratch {
         self.binned.current = bin.min(self.binned.bins.saturating_sub(1));
     }
 
+    /// When node `i`'s evaluation about to start is one of the sampled timings (one in
+    /// `binned.period` of its evaluations, when counting is on), the clock now.
+    #[inline]
+    fn timing_start(&self, i: usize) -> Option<std::time::Instant> {
+        (self.instrumented && self.stats.evaluations[i].is_multiple_of(self.binned.period))
+            .then(std::time::Instant::now)
+    }
+
+    /// Charges node `i`'s evaluation begun at `start` (see [`EvalScratch::timing_start`]) to
+    /// its timings and, when binned timing is on, to the current bin.
+    #[inline]
+    fn timing_end(&mut self, i: usize, start: Option<std::time::Instant>) {
+        let Some(start) = start else { return };
+        let ns = start.elapsed().as_nanos() as u64;
+        self.stats.timed_ns[i] += ns;
+        self.stats.timed[i] += 1;
+        let b = &mut self.binned;
+        if b.bins > 0 {
+            b.ns[i * b.bins + b.current] += ns;
+            b.count[i * b.bins + b.current] += 1;
+        }
+    }
+
     /// The per-bin timings recorded so far.
     pub fn binned_timings(&self) -> &BinnedTimings {
         &self.binned
@@ -494,20 +517,10 @@ impl Graph {
                 scratch.values[i] = v;
                 continue;
             }
-            let timed = scratch.instrumented && scratch.stats.evaluations[i].is_multiple_of(scratch.binned.period);
-            let start = if timed { Some(std::time::Instant::now()) } else { None };
+            let start = scratch.timing_start(i);
             let mut ctx = Ctx { fp, point, work: &mut scratch.stats.work };
             scratch.values[i] = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
-            if let Some(start) = start {
-                let ns = start.elapsed().as_nanos() as u64;
-                scratch.stats.timed_ns[i] += ns;
-                scratch.stats.timed[i] += 1;
-                let b = &mut scratch.binned;
-                if b.bins > 0 {
-                    b.ns[i * b.bins + b.current] += ns;
-                    b.count[i * b.bins + b.current] += 1;
-                }
-            }
+            scratch.timing_end(i, start);
             scratch.stats.evaluations[i] += scratch.instrumented as u64;
         }
     }

@@ -14,6 +14,7 @@
 #![deny(missing_docs)]
 
 mod error;
+pub mod hash;
 pub mod model;
 pub mod planfile;
 pub mod planner;
@@ -21,6 +22,7 @@ pub mod profile;
 pub mod richness;
 
 pub use error::{PlanError, Result};
+pub use hash::{text_hash, Fnv};
 pub use model::{Model, NodePrediction, PlanSpec, Prediction, Target};
 pub use planfile::{PlanFile, PlanNode, Summary, PLAN_SCHEMA};
 pub use planner::{candidates, search, SearchOptions, SearchResult};

@@ -552,3 +552,44 @@ impl NodeOverride for GraphOverride<'_, '_> {
         Some(out)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cache picks a cached node's level with `cache::level_for` (f32) and the profiler and
+    /// the footprint AOV with `footprint::lod` (f64): the planner's predictions assume they agree.
+    #[test]
+    fn cache_levels_and_footprint_lods_agree() {
+        let mut s = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut covs: Vec<glam::DMat2> = (0..20_000)
+            .map(|_| {
+                // A covariance R diag(σ₁², σ₂²) Rᵀ with σ from 1e-9 to 1e3 uv and any orientation.
+                let (s1, s2) = (10f64.powf(next() * 12.0 - 9.0), 10f64.powf(next() * 12.0 - 9.0));
+                let a = next() * std::f64::consts::TAU;
+                let r = glam::DMat2::from_angle(a);
+                r * glam::DMat2::from_diagonal(glam::DVec2::new(s1 * s1, s2 * s2)) * r.transpose()
+            })
+            .collect();
+        covs.extend([
+            glam::DMat2::ZERO,
+            glam::DMat2::from_diagonal(glam::DVec2::new(f64::INFINITY, 1.0)),
+            glam::DMat2::from_diagonal(glam::DVec2::new(f64::NAN, 1.0)),
+            glam::DMat2::from_diagonal(glam::DVec2::new(-1e-6, 1e-6)),
+        ]);
+        for density in [1.0, 64.0, f64::from(LEVEL0_TEXELS_PER_UV), 0.0] {
+            for c in &covs {
+                let fine = footprint::lod(*c, density);
+                let coarse = cache::level_for(c.as_mat2(), density as f32);
+                // f32 covariances keep ~7 digits: the levels agree to ~1e-6 × log2 of the scale.
+                assert!((fine - coarse).abs() <= 1e-4 || fine == coarse, "cov {c} density {density}: {fine} vs {coarse}");
+            }
+        }
+    }
+}

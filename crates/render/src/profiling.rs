@@ -422,20 +422,6 @@ fn node_inputs(g: &Graph, id: NodeId) -> Vec<u32> {
     v
 }
 
-/// FNV-1a over bytes, as hex.
-pub fn fnv_hex(parts: &[&[u8]]) -> String {
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for p in parts {
-        for &b in *p {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-        h ^= 0xff;
-        h = h.wrapping_mul(0x0100_0000_01b3);
-    }
-    format!("{h:016x}")
-}
-
 /// A hash of a graph's structure: node names, categories, types and connections.
 pub fn graph_hash(g: &Graph) -> String {
     let mut text = String::new();
@@ -448,7 +434,7 @@ pub fn graph_hash(g: &Graph) -> String {
             node_inputs(g, id)
         ));
     }
-    fnv_hex(&[text.as_bytes()])
+    plan::text_hash(&[text.as_bytes()])
 }
 
 /// Measures on this machine: a trilinear lookup that hits, the tile machinery's cost per texel

@@ -3,8 +3,9 @@
 //! cannot be written under one name and looked for under another.
 //!
 //! Timings are in seconds (`_s`), memory in bytes; counts are whole numbers. Readers need only
-//! `phases.render_s` and `counts.samples`: every other field reads as zero (or empty) when a
-//! file lacks it, as files written before it was added do.
+//! `phases.render_s` and `counts.samples` (and, in a plan's `predicted`, every quantity): any
+//! other field reads as zero (or empty) when a file lacks it, as files written before it was
+//! added do.
 
 use crate::caching::NodeCache;
 use crate::integrator::RenderCounts;
@@ -115,6 +116,7 @@ impl From<&RenderCounts> for Counts {
 
 /// Rates over the render phase.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Throughput {
     /// Camera samples per second.
     pub samples_per_s: f64,
@@ -125,6 +127,7 @@ pub struct Throughput {
 /// Values that were not finite: samples left out, the graph nodes that first gave non-finite
 /// values, and the first samples of each kind with where their value came from.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NonFiniteStats {
     /// Samples whose radiance was not finite.
     pub samples: u64,
@@ -138,6 +141,7 @@ pub struct NonFiniteStats {
 
 /// One sample of [`NonFiniteStats`].
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NonFiniteSampleStats {
     /// Pixel column.
     pub x: u32,
@@ -151,6 +155,7 @@ pub struct NonFiniteSampleStats {
 
 /// Where a texture value went non-finite.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NonFiniteOrigin {
     /// The material shaded.
     pub material: String,
@@ -170,6 +175,7 @@ pub struct NonFiniteOrigin {
 
 /// A node that gave non-finite values.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NonFiniteNode {
     /// The graph's document.
     pub graph: String,
@@ -183,6 +189,7 @@ pub struct NonFiniteNode {
 
 /// One scene graph's statistics.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct GraphStats {
     /// The document it came from.
     pub document: String,
@@ -195,6 +202,7 @@ pub struct GraphStats {
 
 /// One node's statistics.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct NodeStats {
     /// `nodegraph/node`.
     pub name: String,
@@ -215,6 +223,7 @@ pub struct NodeStats {
 
 /// Work counters of a graph.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct WorkStats {
     /// Noise octaves evaluated.
     pub octaves: u64,
@@ -257,6 +266,7 @@ impl GraphStats {
 
 /// The profile and plan of a `--strategy auto` render.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct PlanStats {
     /// `auto`.
     pub strategy: String,
@@ -282,6 +292,7 @@ pub struct PlanStats {
 
 /// The tile cache's counters over a render.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CacheReport {
     /// The strategy, as `--strategy` spells it.
     pub strategy: String,
@@ -316,6 +327,7 @@ pub struct CacheReport {
 
 /// One cached node's counters.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CacheNodeStats {
     /// `nodegraph/node`.
     pub name: String,
@@ -327,6 +339,7 @@ pub struct CacheNodeStats {
 
 /// One level's counters of a cached node.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct CacheLevelStats {
     /// The mip level.
     pub level: u8,

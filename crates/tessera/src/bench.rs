@@ -1117,9 +1117,10 @@ mod tests {
                        "tile_hits": 40, "tile_misses": 10, "tiles_filled": 10, "texels_filled": 640,
                        "evictions": 0, "refills": 0 },
             "plan": { "strategy": "auto", "profile_s": 0.25, "plan_s": 0.25, "cached_nodes": ["g/a", "g/b"],
-                      "predicted": { "evaluations": 100, "lookups": 50, "tiles_filled": 20,
-                                     "peak_bytes": 800, "render_s": 1.0 } }
+                      "predicted": { "evaluations": 100, "lookups": 50, "tiles_filled": 20, "texels_filled": 1280,
+                                     "peak_bytes": 800, "texture_thread_s": 0.5, "render_s": 1.0 } }
         });
+        let stats_with_plan = stats.clone();
         let s = parse_sample(stats, Image::new(1, 1), 3.0).unwrap();
         assert_eq!(s.time_s(), 0.25 + 0.25 + 0.5 + 2.0);
         assert_eq!((s.node_evaluations, s.rays, s.samples), (200, 15, 1000));
@@ -1131,8 +1132,12 @@ mod tests {
         assert_eq!(p.ratio["evaluations"], 0.5);
         assert_eq!(p.ratio["peak_bytes"], 2.0);
         assert_eq!(p.ratio["render_s"], 0.5);
-        // Not predicted: measured only.
-        assert!(!p.predicted.contains_key("texels_filled") && !p.ratio.contains_key("texels_filled"));
+        assert_eq!(p.ratio["texels_filled"], 2.0);
+        assert_eq!(p.ratio["tiles_filled"], 2.0);
+        // A plan whose prediction lacks a quantity is not a valid stats document.
+        let mut partial = stats_with_plan.clone();
+        partial["plan"]["predicted"].as_object_mut().unwrap().remove("texels_filled");
+        assert!(parse_sample(partial, Image::new(1, 1), 3.0).err().unwrap().contains("texels_filled"));
         // Stats without a plan, a cache or a render time.
         let bare = serde_json::json!({ "phases": { "load_s": 0.0, "render_s": 1.0 }, "counts": { "samples": 4 },
                                        "cache": null });

@@ -110,7 +110,7 @@ pub fn scene_id(path: Option<&Path>, defines: &[(String, String)]) -> Result<Sce
         None => ("<embedded default scene>".to_string(), DEFAULT_SCENE.as_bytes().to_vec()),
     };
     let defs: String = defines.iter().map(|(k, v)| format!("{k}={v};")).collect();
-    Ok(SceneId { name, hash: render::profiling::fnv_hex(&[&text, defs.as_bytes()]) })
+    Ok(SceneId { name, hash: plan::text_hash(&[&text, defs.as_bytes()]) })
 }
 
 /// Profiles `scene` on the current rayon pool.
