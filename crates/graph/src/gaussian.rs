@@ -338,13 +338,13 @@ pub fn square_wave_expectation(m: f64, s: f64) -> (f64, f64) {
 /// Uncorrelated spreads give the product of the two axes' expectations. A correlated footprint
 /// is a turned ellipse, which the product blurs as the box around it: a thin footprint along a
 /// diagonal meets checks of one colour only. Up to `|ρ| = 0.6`, Mehler's expansion
-/// ([`checker_mehler`]); beyond, with principal spreads `a ≥ b` (cells):
+/// (`checker_mehler`); beyond, with principal spreads `a ≥ b` (cells):
 /// - the double Fourier series `(16/π²) Σ_{j,k odd} E[sin(πjU) sin(πkV)]/(jk)`, each term a
 ///   cosine times the Gaussian's characteristic function, summed over the band of `(j, k)`
-///   where that damping exceeds 1e-9 ([`checker_fourier`], about `1.7/(ab)` terms);
+///   where that damping exceeds 1e-9 (`checker_fourier`, about `1.7/(ab)` terms);
 /// - when that band would hold more than 400 terms (footprints both small and very thin), the
 ///   ellipse as 32 lines along its major axis across ±6σ of its width (midpoint rule), each
-///   integrated exactly ([`checker_line`]). The mean of a line is only piecewise smooth across
+///   integrated exactly (`checker_line`). The mean of a line is only piecewise smooth across
 ///   (it kinks where the line passes a grid corner), hence the plain midpoint rule; lines
 ///   crossing more than [`CHECKER_MAX_CROSSINGS`] grid lines fall back to the product.
 pub fn checker_expectation(m: [f64; 2], c: [f64; 3], axes: [f64; 2]) -> f64 {

@@ -51,7 +51,9 @@ pub struct TargetJson {
     pub threads: u32,
 }
 
-/// Totals of a [`Prediction`].
+/// The totals the model predicts for a plan (a [`Prediction`]'s, in plan files and render stats)
+/// and a render measures (`tessera analyze`, `--strategy auto` reports): one type for both, so
+/// predicted and measured are compared field by field.
 #[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, PartialEq)]
 pub struct Summary {
     /// Node evaluations.

@@ -2,6 +2,137 @@
 //!
 //! Each can be sampled from a reference point (next-event estimation) and, where it is not a
 //! delta light, report the solid-angle density of that sampling for multiple importance sampling.
+//!
+//! # Scene parameters
+//!
+//! The scene loader ([`crate::loader`]) builds an [`Emitter`] from each `<emitter>` element and
+//! reads the parameters listed below. In these tables a `spectrum` is an `<rgb>`, a
+//! `<spectrum>` with a single value, or a `<float>` (used for all three channels); it must be
+//! finite and non-negative, or the scene fails to load. No emitter parameter accepts a
+//! `<texture>`. Any parameter or nested object that an emitter does not read is reported as
+//! unused at its line and stops the load, and an emitter type other than these five is an error
+//! that names the supported ones. A scene without any emitter still loads, with a warning that
+//! the image will be black.
+//!
+//! ## `area`
+//!
+//! Makes the shape it is nested in a light. It is accepted only inside a `<shape>`, one per
+//! shape; at the top level of the scene it is an error ("an area emitter must be nested in a
+//! <shape>").
+//!
+//! | parameter  | type     | default | meaning                                                  |
+//! |------------|----------|---------|----------------------------------------------------------|
+//! | `radiance` | spectrum | 1       | emitted radiance, the same at every point and direction  |
+//!
+//! Light leaves only the side that the shape's shading normal faces; the shape's
+//! `flip_normals` moves it to the other side. A `sphere` without `flip_normals` is sampled over
+//! the cone of directions it covers as seen from the reference point; every other shape, and a
+//! flipped sphere, is sampled uniformly by area.
+//!
+//! ```xml
+//! <shape type="rectangle">
+//!     <transform name="to_world">
+//!         <rotate x="1" angle="90"/>
+//!         <translate y="2"/>
+//!     </transform>
+//!     <emitter type="area">
+//!         <rgb name="radiance" value="10, 9, 8"/>
+//!     </emitter>
+//! </shape>
+//! ```
+//!
+//! ## `point`
+//!
+//! An isotropic point light. Rays cannot hit it; the value it delivers to a point at distance
+//! `d` is `intensity / d²`.
+//!
+//! | parameter   | type      | default   | meaning                                            |
+//! |-------------|-----------|-----------|----------------------------------------------------|
+//! | `position`  | point     | (0, 0, 0) | where the light is (a `<vector>` is accepted too)  |
+//! | `to_world`  | transform | none      | when given, applied to `position`                  |
+//! | `intensity` | spectrum  | 1         | radiant intensity (W/sr)                           |
+//!
+//! With only `to_world`, the light sits at that transform's translation, as it moves the
+//! default position, the origin.
+//!
+//! ```xml
+//! <emitter type="point">
+//!     <point name="position" x="0" y="4" z="1"/>
+//!     <spectrum name="intensity" value="50"/>
+//! </emitter>
+//! ```
+//!
+//! ## `constant`
+//!
+//! Uniform radiance arriving from every direction at infinity; rays that leave the scene see
+//! it. It is sampled uniformly over the sphere of directions. It reads no `to_world`.
+//!
+//! | parameter  | type     | default | meaning                                 |
+//! |------------|----------|---------|-----------------------------------------|
+//! | `radiance` | spectrum | 1       | radiance arriving from every direction  |
+//!
+//! ```xml
+//! <emitter type="constant">
+//!     <rgb name="radiance" value="0.6, 0.7, 1.0"/>
+//! </emitter>
+//! ```
+//!
+//! ## `envmap`
+//!
+//! A latitude-longitude image at infinity ([`EnvMap`]); rays that leave the scene see it.
+//!
+//! | parameter  | type      | default  | meaning                                             |
+//! |------------|-----------|----------|-----------------------------------------------------|
+//! | `filename` | string    | required | the image, relative to the scene file's folder      |
+//! | `scale`    | float     | 1        | multiplier of the image's values (0 is allowed)     |
+//! | `to_world` | transform | identity | orientation of the map                              |
+//!
+//! The image may be `.exr` (read as linear RGB; alpha is ignored) or `.png`, `.jpg`, `.jpeg`
+//! (decoded from sRGB to linear); other extensions are an error. In the map's own frame the top
+//! row of the image looks along +y and the bottom row along −y; the centre column looks along
+//! +z, the column a quarter of the way from the left along +x, and the left and right edges
+//! along −z. Lookups are bilinear with the `repeat` wrap mode. `to_world` should be a
+//! rotation: its columns are normalised, which removes any scale, and its translation is
+//! ignored.
+//!
+//! Directions are importance-sampled in proportion to luminance times `sin θ`. Each texel is
+//! weighted by the largest luminance in a small neighbourhood around it, so that no direction
+//! that receives radiance through a bilinear lookup has zero density. Errors: no `filename`
+//! ("envmap needs a 'filename'"), a file that does not exist, an image with NaN or infinite
+//! values, a negative or non-finite `scale`, and an image whose luminance is nowhere positive
+//! ("envmap image is black everywhere").
+//!
+//! ```xml
+//! <emitter type="envmap">
+//!     <string name="filename" value="textures/sky.exr"/>
+//!     <float name="scale" value="1.5"/>
+//!     <transform name="to_world">
+//!         <rotate y="1" angle="30"/>
+//!     </transform>
+//! </emitter>
+//! ```
+//!
+//! ## `directional`
+//!
+//! Parallel light from infinitely far away, such as the sun. Like `point`, it is a delta light
+//! that rays cannot hit.
+//!
+//! | parameter    | type      | default   | meaning                                           |
+//! |--------------|-----------|-----------|---------------------------------------------------|
+//! | `direction`  | vector    | (0, 0, 1) | direction of travel (a `<point>` is accepted too) |
+//! | `to_world`   | transform | none      | when given, its linear part acts on `direction`   |
+//! | `irradiance` | spectrum  | 1         | irradiance on a surface facing the light          |
+//!
+//! With only `to_world`, the light travels along the transform's image of +z. The direction is
+//! normalised; if it is zero or not finite, that is an error ("directional emitter needs a
+//! non-zero direction").
+//!
+//! ```xml
+//! <emitter type="directional">
+//!     <vector name="direction" x="-1" y="-1" z="-0.5"/>
+//!     <rgb name="irradiance" value="3, 2.8, 2.5"/>
+//! </emitter>
+//! ```
 
 use crate::geometry::{Shape, ShapeGeometry};
 use crate::math::{luminance, Spectrum};

@@ -15,6 +15,7 @@
 //! source and imports neither the cache nor the profiler; they import it. No two modules import
 //! each other, directly or around a circle (a test reads the imports from the source).
 
+#![deny(missing_docs)]
 // `!(x > 0.0)` is how this crate says "not positive, or NaN": the negation is the point.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 

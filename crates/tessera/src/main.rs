@@ -344,7 +344,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
             let stem = outputs[0].with_extension("");
             PathBuf::from(format!("{}.report", stem.display()))
         });
-        let measured = select_cmd::Measured::of_render(&out.graph_stats, node_cache.as_ref(), render_s);
+        let measured = select_cmd::measured_of_render(&out.graph_stats, node_cache.as_ref(), render_s);
         let comparison = a.write_report(&dir, measured)?;
         if !args.quiet {
             eprintln!("{comparison}");

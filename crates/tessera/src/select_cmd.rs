@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Context, Result};
 use plan::profile::SceneId;
-use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, SearchResult, Target};
+use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, SearchResult, Summary, Target};
 use render::integrator::{FilterScale, RenderSettings};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
@@ -152,49 +152,37 @@ pub fn plan_profile(
     Ok((r, file))
 }
 
-/// What a render measured, in the model's terms.
-#[derive(Clone, Copy, Debug, Default)]
-pub struct Measured {
-    pub evaluations: f64,
-    pub lookups: f64,
-    pub tiles_filled: f64,
-    pub texels_filled: f64,
-    pub peak_bytes: f64,
-    pub render_s: f64,
+/// What a render measured, in the model's terms (the quantities a prediction's [`Summary`]
+/// holds; texture thread-seconds are not measured and read 0): from a finished render, its
+/// graph statistics and cache.
+pub fn measured_of_render(
+    graph_stats: &[graph::EvalStats],
+    cache: Option<&render::caching::NodeCache>,
+    render_s: f64,
+) -> Summary {
+    let evaluations = graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64;
+    let mut m = Summary { evaluations, render_s, ..Summary::default() };
+    if let Some(nc) = cache {
+        let st = nc.stats();
+        let t = st.total();
+        m.lookups = st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64;
+        m.tiles_filled = t.fills as f64;
+        m.texels_filled = t.texels_filled as f64;
+        m.peak_bytes = st.peak_bytes as f64;
+    }
+    m
 }
 
-impl Measured {
-    /// From a finished render: its graph statistics and cache.
-    pub fn of_render(
-        graph_stats: &[graph::EvalStats],
-        cache: Option<&render::caching::NodeCache>,
-        render_s: f64,
-    ) -> Measured {
-        let evaluations = graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64;
-        let mut m = Measured { evaluations, render_s, ..Measured::default() };
-        if let Some(nc) = cache {
-            let st = nc.stats();
-            let t = st.total();
-            m.lookups = st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64;
-            m.tiles_filled = t.fills as f64;
-            m.texels_filled = t.texels_filled as f64;
-            m.peak_bytes = st.peak_bytes as f64;
-        }
-        m
+/// What a render measured, from its `tessera.stats/1` document (as [`measured_of_render`]).
+pub fn measured_of_stats(v: &RenderStats) -> Summary {
+    let mut m = Summary { evaluations: v.node_evaluations() as f64, render_s: v.phases.render_s, ..Summary::default() };
+    if let Some(c) = &v.cache {
+        m.lookups = c.lookups as f64;
+        m.tiles_filled = c.tiles_filled as f64;
+        m.texels_filled = c.texels_filled as f64;
+        m.peak_bytes = c.peak_bytes as f64;
     }
-
-    /// From a `tessera.stats/1` document.
-    pub fn from_stats(v: &RenderStats) -> Measured {
-        let mut m =
-            Measured { evaluations: v.node_evaluations() as f64, render_s: v.phases.render_s, ..Measured::default() };
-        if let Some(c) = &v.cache {
-            m.lookups = c.lookups as f64;
-            m.tiles_filled = c.tiles_filled as f64;
-            m.texels_filled = c.texels_filled as f64;
-            m.peak_bytes = c.peak_bytes as f64;
-        }
-        m
-    }
+    m
 }
 
 fn rel(pred: f64, meas: f64) -> String {
@@ -212,7 +200,7 @@ fn mib(b: f64) -> f64 {
 }
 
 /// Markdown rows comparing a prediction with a measurement.
-pub fn comparison_table(rows: &[(String, Prediction, Measured)]) -> String {
+pub fn comparison_table(rows: &[(String, Summary, Summary)]) -> String {
     let mut s = String::from("| strategy | quantity | predicted | measured | error |\n|---|---|---|---|---|\n");
     for (name, p, m) in rows {
         let q = [
@@ -412,7 +400,7 @@ pub fn run_analyze(args: AnalyzeArgs) -> Result<()> {
         let t = Target { samples: v.counts.samples.max(1), threads: v.threads.max(1) };
         let pred = Model::new(&profile, t)?.predict(&spec);
         let name = v.cache.as_ref().map_or("none", |c| c.strategy.as_str()).to_string();
-        rows.push((name, pred, Measured::from_stats(&v)));
+        rows.push((name, Summary::from(&pred), measured_of_stats(&v)));
     }
     if !rows.is_empty() {
         let _ = writeln!(md, "## Predicted against measured\n\n{}", comparison_table(&rows));
@@ -460,7 +448,7 @@ pub fn write_report(
     profile: &Profile,
     md: &str,
     planned: (&Prediction, &PlanSpec),
-    rows: &[(String, Prediction, Measured)],
+    rows: &[(String, Summary, Summary)],
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("{}: cannot create", dir.display()))?;
     write_atomic(&dir.join("table.md"), md.as_bytes())?;
@@ -517,8 +505,8 @@ pub fn node_levels_svg(profile: &Profile, p: &Prediction, plan: &PlanSpec) -> St
 }
 
 /// Predicted against measured, one chart per quantity, side by side in one SVG.
-pub fn scatter_svg(rows: &[(String, Prediction, Measured)]) -> String {
-    let quantity = |label: &str, f: fn(&Prediction, &Measured) -> (f64, f64)| {
+pub fn scatter_svg(rows: &[(String, Summary, Summary)]) -> String {
+    let quantity = |label: &str, f: fn(&Summary, &Summary) -> (f64, f64)| {
         let pts: Vec<(String, f64, f64)> = rows
             .iter()
             .map(|(name, p, m)| {
@@ -591,8 +579,8 @@ pub fn auto_plan(
 impl AutoPlan {
     /// Writes the run's report folder (tables, plots, `profile.json`, `plan.json`) with the
     /// measured render; returns the predicted-against-measured table.
-    pub fn write_report(&self, dir: &Path, measured: Measured) -> Result<String> {
-        let rows = vec![("auto".to_string(), self.result.prediction.clone(), measured)];
+    pub fn write_report(&self, dir: &Path, measured: Summary) -> Result<String> {
+        let rows = vec![("auto".to_string(), Summary::from(&self.result.prediction), measured)];
         let model = Model::new(&self.profile, self.target)?;
         let comparison = comparison_table(&rows);
         let md = format!(

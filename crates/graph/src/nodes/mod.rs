@@ -2,7 +2,7 @@
 //!
 //! [`definition`] maps a MaterialX category to its [`NodeDef`]: the inputs in order with their
 //! types and nodedef defaults (hard-coded from the MaterialX 1.39 Standard Nodes spec), the
-//! output types it accepts, and how to build its [`Op`]. [`eval`] dispatches a filtered
+//! output types it accepts, and how to build its [`Op`]. `eval` dispatches a filtered
 //! evaluation to the family.
 
 pub(crate) mod channel;
