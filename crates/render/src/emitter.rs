@@ -17,8 +17,8 @@
 //! ## `area`
 //!
 //! Makes the shape it is nested in a light. It is accepted only inside a `<shape>`, one per
-//! shape; at the top level of the scene it is an error ("an area emitter must be nested in a
-//! <shape>").
+//! shape; at the top level of the scene it is an error:
+//! `an area emitter must be nested in a <shape>`.
 //!
 //! | parameter  | type     | default | meaning                                                  |
 //! |------------|----------|---------|----------------------------------------------------------|

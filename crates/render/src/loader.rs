@@ -3,6 +3,127 @@
 //! The XML reader ([`crate::xml`]) gives typed, located parameters; this module knows the
 //! plugins. Every plugin reads its parameters by name and then asks the reader whether anything
 //! was left unused, so a misspelt parameter is an error at its line, as in Mitsuba.
+//!
+//! Each BSDF's parameters are listed in its model's file under [`crate::bsdf`], the emitters'
+//! in [`crate::emitter`], and the shapes' below.
+//!
+//! # Shapes
+//!
+//! The loader reads the `<shape>` elements placed directly in the `<scene>` (or brought there by
+//! an `<include>`). It accepts the types `obj`, `ply`, `rectangle`, `cube`, `sphere` and
+//! `disk`; any other type is an error that lists these six. Every shape reads the following:
+//!
+//! | parameter        | type      | default         | meaning                                 |
+//! |------------------|-----------|-----------------|-----------------------------------------|
+//! | `to_world`       | transform | identity        | places the shape in the world           |
+//! | `flip_normals`   | boolean   | `false`         | turns the normals to the other side     |
+//! | a `<bsdf>`       | object    | `diffuse`, 0.5  | the surface material, nested or `<ref>` |
+//! | an `<emitter>`   | object    | none            | an `area` light on this shape           |
+//!
+//! A `to_world` that is singular or not finite is an error. `flip_normals` reverses both the
+//! geometric and the shading normal, which decides the front of one-sided BSDFs and the side an
+//! area light emits from. Without a `<bsdf>` the shape gets a `diffuse` BSDF with reflectance
+//! 0.5, Mitsuba's default. A `<ref id="..."/>` to a `<bsdf>` declared earlier shares one
+//! material among all the shapes that refer to it. A shape takes at most one `<bsdf>` and one
+//! `<emitter>`, and the emitter must be of type `area` (its `radiance` is described in
+//! [`crate::emitter`]); anything else is an error. Every other parameter or nested object,
+//! including a `<medium>`, is reported as unused and stops the load, so media are not
+//! supported. The shape's `id`, or else its type, names it in messages.
+//!
+//! ## `obj` and `ply`
+//!
+//! A triangle mesh read from a file.
+//!
+//! | parameter         | type    | default                     | meaning                        |
+//! |-------------------|---------|-----------------------------|--------------------------------|
+//! | `filename`        | string  | required                    | the mesh file                  |
+//! | `face_normals`    | boolean | `false`                     | ignores the file's normals     |
+//! | `flip_tex_coords` | boolean | `true` (obj), `false` (ply) | replaces each v by 1 − v       |
+//!
+//! A relative `filename` is taken from the scene file's folder. Leaving it out is an error
+//! ("obj needs a 'filename'", or the same with ply), and so is naming a file that does not
+//! exist ("mesh file '...' not found"). In an OBJ file all objects and groups become one mesh,
+//! faces with more than three corners are split into a fan of triangles, and materials are
+//! ignored ([`crate::mesh::load_obj`]). A PLY file may be ASCII or binary of either byte order
+//! ([`crate::mesh::load_ply`]).
+//!
+//! The mesh is then checked ([`TriangleMesh::validate`]): it is an error if it has no
+//! triangles, an index out of range, a different number of normals or texture coordinates than
+//! positions, or a NaN or infinite position, normal or texture coordinate. Triangles with
+//! exactly zero area in the file's coordinates are removed, with one warning on standard error;
+//! if every triangle has zero area, that is an error. Positions are transformed by `to_world`,
+//! and normals by its inverse transpose and then renormalised. A mesh whose area in the world
+//! is zero or not finite is an error ("shape has zero surface area").
+//!
+//! Shading uses the interpolated vertex normals when the file has them and `face_normals` is
+//! `false`; otherwise it uses the triangle's own normal, which faces the side from which its
+//! corners run counter-clockwise. A mesh without texture coordinates gives each triangle's
+//! corners the uv values (0, 0), (1, 0) and (0, 1).
+//!
+//! ## `rectangle` and `cube`
+//!
+//! Built-in meshes with no parameters beyond the common ones (`face_normals` and
+//! `flip_tex_coords` are not read, so giving them is an error). `rectangle` is the square
+//! [−1, 1]² in the object's z = 0 plane, with normal +z and uv = ((x + 1)/2, (y + 1)/2).
+//! `cube` is [−1, 1]³ with outward normals, each face covering the whole uv square.
+//!
+//! ## `sphere`
+//!
+//! An exact sphere (not tessellated).
+//!
+//! | parameter | type  | default   | meaning                                                 |
+//! |-----------|-------|-----------|---------------------------------------------------------|
+//! | `center`  | point | (0, 0, 0) | centre in object space (a `<vector>` is accepted too)   |
+//! | `radius`  | float | 1         | radius in object space; must be finite and positive     |
+//!
+//! `to_world` moves the centre and multiplies the radius by its scale, which must be the same
+//! along the three axes (to a relative tolerance of 10⁻³); a non-uniform scale is an error. A
+//! centre that is not finite is an error too. The normal points outwards. The uv is
+//! (φ/2π, θ/π), with θ measured from the object's +z axis and φ around it from +x, so
+//! `to_world`'s rotation turns the texture with the sphere.
+//!
+//! ## `disk`
+//!
+//! The exact unit disk in the object's z = 0 plane, with normal +z and uv = (r, φ/2π), where r
+//! is the distance from the centre and φ the angle from +x. It has no parameters beyond the
+//! common ones; `to_world` places, scales and shears it, and its normal follows by the
+//! inverse transpose.
+//!
+//! ## Example
+//!
+//! ```xml
+//! <bsdf type="diffuse" id="white">
+//!     <rgb name="reflectance" value="0.8, 0.8, 0.8"/>
+//! </bsdf>
+//!
+//! <shape type="obj">
+//!     <string name="filename" value="meshes/bunny.obj"/>
+//!     <boolean name="face_normals" value="true"/>
+//!     <transform name="to_world">
+//!         <scale value="2"/>
+//!         <translate x="-0.5"/>
+//!     </transform>
+//!     <ref id="white"/>
+//! </shape>
+//!
+//! <shape type="sphere">
+//!     <point name="center" x="0" y="3" z="0"/>
+//!     <float name="radius" value="0.25"/>
+//!     <emitter type="area">
+//!         <rgb name="radiance" value="20, 20, 20"/>
+//!     </emitter>
+//! </shape>
+//!
+//! <shape type="disk">
+//!     <transform name="to_world">
+//!         <rotate x="1" angle="-90"/>
+//!         <scale value="5"/>
+//!     </transform>
+//!     <bsdf type="twosided">
+//!         <bsdf type="diffuse"/>
+//!     </bsdf>
+//! </shape>
+//! ```
 
 use crate::bsdf::{conductor_preset, BsdfDesc, MicrofacetKind};
 use crate::camera::{Camera, FovAxis, Rfilter};
@@ -570,6 +691,8 @@ impl Builder {
         Ok(i)
     }
 
+    /// Builds one `<shape>` with its BSDF and area light; its parameters are listed in the
+    /// module docs' "Shapes" section.
     fn shape(&mut self, obj: &Object) -> Result<()> {
         let to_world = obj.transform("to_world")?.unwrap_or(Mat4::IDENTITY);
         if to_world.determinant().abs() < 1e-12 || !to_world.is_finite() {
@@ -807,6 +930,8 @@ impl Builder {
         Ok(Texture::GraphOutput { slot: slot as u32, scalar })
     }
 
+    /// Builds one top-level `<emitter>`; the parameters of each type are listed in
+    /// [`crate::emitter`]. An `area` emitter is read by [`Builder::shape`] instead.
     fn emitter(&mut self, obj: &Object) -> Result<Emitter> {
         let e = match obj.plugin.as_str() {
             "point" => {

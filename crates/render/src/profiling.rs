@@ -216,12 +216,72 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
             opts.pixel_fraction
         )));
     }
-    let streams: usize = scene.materials.iter().map(|m| m.graphs.len()).sum();
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let settings = opts.settings;
     // Calibrate first: it also brings the cores out of idle, whose slow clocks would otherwise
     // inflate the first tens of milliseconds of the profile.
     let (lookup_ns, fill_ns_per_texel, timer_ns) = calibrate();
+    let t = trace(scene, opts);
+    if t.samples == 0 {
+        return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
+    }
+    let tap = &t.profiler;
+    // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
+    let outside_thread_s = tap.warm.clone().robust_mean().map_or(0.0, |ns| ns * t.samples as f64 * 1e-9);
+    let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
+    let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
+    let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
+    let node_overhead_ns = node_overhead_ns(&t.stats, texture_thread_s, timer_ns);
+    let graphs = scene
+        .graphs
+        .iter()
+        .enumerate()
+        .map(|(gi, sg)| profile_graph(sg.file_name().to_string(), sg.graph(), t.binned.get(gi)))
+        .collect();
+    Ok(Profile {
+        schema: PROFILE_SCHEMA.into(),
+        scene: opts.scene.clone(),
+        render: ProfileRender {
+            width: scene.camera.width,
+            height: scene.camera.height,
+            spp: opts.settings.spp,
+            scene_spp: scene.spp,
+            pixel_fraction: opts.pixel_fraction,
+            samples: t.samples,
+            tile_samples: t.first_samples,
+            threads: rayon::current_num_threads() as u32,
+            wall_s: t.wall_s,
+            outside_thread_s,
+            texture_thread_s,
+            tap_thread_s,
+        },
+        cache: cache_geometry()?,
+        machine: MachineCosts { lookup_ns, fill_ns_per_texel, node_overhead_ns, timer_ns },
+        graphs,
+        streams: profile_streams(scene, tap),
+    })
+}
+
+/// What the profiling render's buckets recorded, merged.
+struct Traced {
+    /// The merged recorder (requests, tiles, timings, warm samples).
+    profiler: Profiler,
+    /// Camera samples traced.
+    samples: u64,
+    /// Of them, each traced pixel's first (the ones recorded as tile reads).
+    first_samples: u64,
+    /// Per graph: the evaluator's timings per node and level bin.
+    binned: Vec<graph::BinnedTimings>,
+    /// Per graph: evaluation statistics.
+    stats: Vec<graph::EvalStats>,
+    /// Wall time of the render.
+    wall_s: f64,
+}
+
+/// Renders the profile's pixels through the integrator's bucket driver with a [`Profiler`] per
+/// bucket, and merges the buckets in their (fixed) order.
+fn trace(scene: &Scene, opts: &ProfileOptions) -> Traced {
+    let streams: usize = scene.materials.iter().map(|m| m.graphs.len()).sum();
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let settings = opts.settings;
     let start = Instant::now();
     let results: Vec<BucketProfile> = for_each_bucket(w, h, &|b| {
         let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, Profiler::new(streams));
@@ -246,41 +306,38 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     .map(|(_, r)| r)
     .collect();
     let wall_s = start.elapsed().as_secs_f64();
-    let threads = rayon::current_num_threads() as u32;
-
-    let mut tap = Profiler::new(streams);
-    let mut counts = RenderCounts::default();
-    let mut binned: Vec<graph::BinnedTimings> = Vec::new();
-    let mut stats: Vec<graph::EvalStats> = vec![graph::EvalStats::default(); scene.graphs.len()];
-    let mut first_samples = 0u64;
-    for (t, c, b, s) in &results {
-        tap.merge(t);
-        counts.samples += c.samples;
-        first_samples += c.samples - t.warm.outside_ns.len() as u64;
-        if binned.is_empty() {
-            binned = b.clone();
+    let mut t = Traced {
+        profiler: Profiler::new(streams),
+        samples: 0,
+        first_samples: 0,
+        binned: Vec::new(),
+        stats: vec![graph::EvalStats::default(); scene.graphs.len()],
+        wall_s,
+    };
+    for (p, c, b, s) in &results {
+        t.profiler.merge(p);
+        t.samples += c.samples;
+        t.first_samples += c.samples - p.warm.outside_ns.len() as u64;
+        if t.binned.is_empty() {
+            t.binned = b.clone();
         } else {
-            for (x, y) in binned.iter_mut().zip(b) {
+            for (x, y) in t.binned.iter_mut().zip(b) {
                 x.ns.iter_mut().zip(&y.ns).for_each(|(p, q)| *p += q);
                 x.count.iter_mut().zip(&y.count).for_each(|(p, q)| *p += q);
             }
         }
-        for (x, y) in stats.iter_mut().zip(s) {
+        for (x, y) in t.stats.iter_mut().zip(s) {
             x.merge(y);
         }
     }
-    if counts.samples == 0 {
-        return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
-    }
-    // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
-    let outside_thread_s = tap.warm.robust_mean().map_or(0.0, |ns| ns * counts.samples as f64 * 1e-9);
-    let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
-    let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
-    let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
-    // The evaluator's bookkeeping per node evaluation: graph time not inside any node's own
-    // (timed) work, less the clocks' share.
+    t
+}
+
+/// The evaluator's bookkeeping per node evaluation: graph time (`texture_thread_s`) not inside
+/// any node's own timed work, less the clocks' share.
+fn node_overhead_ns(stats: &[graph::EvalStats], texture_thread_s: f64, timer_ns: f64) -> f64 {
     let (mut evaluations, mut own_s) = (0u64, 0.0);
-    for st in &stats {
+    for st in stats {
         for (i, &e) in st.evaluations.iter().enumerate() {
             evaluations += e;
             if st.timed[i] > 0 {
@@ -289,19 +346,17 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
             }
         }
     }
-    let node_overhead_ns = if evaluations > 0 {
+    if evaluations > 0 {
         ((texture_thread_s - own_s) / evaluations as f64 * 1e9 - timer_ns / PROFILE_TIMING_PERIOD as f64).max(0.0)
     } else {
         0.0
-    };
+    }
+}
 
-    let graphs = scene
-        .graphs
-        .iter()
-        .enumerate()
-        .map(|(gi, sg)| profile_graph(sg.file_name().to_string(), sg.graph(), binned.get(gi)))
-        .collect();
-    let mut pstreams = Vec::with_capacity(streams);
+/// One profile stream per (material, graph) pair, in the scene's order, with the nodes its
+/// outputs come from.
+fn profile_streams(scene: &Scene, tap: &Profiler) -> Vec<Stream> {
+    let mut out = Vec::new();
     for (mi, m) in scene.materials.iter().enumerate() {
         for mg in &m.graphs {
             let g = scene.graphs[mg.graph as usize].graph();
@@ -314,39 +369,24 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
                     _ => None,
                 })
                 .collect();
-            pstreams.push(stream_of(&tap.streams[mg.stream as usize], format!("material {mi}"), mg.graph, outputs));
+            out.push(stream_of(&tap.streams[mg.stream as usize], format!("material {mi}"), mg.graph, outputs));
         }
     }
+    out
+}
+
+/// The layout of the cache the profile's tile reads are counted in ([`node_texture`] in tiles
+/// of the default size).
+fn cache_geometry() -> crate::error::Result<CacheGeometry> {
     let probe = TileCache::new(CacheConfig::default()).map_err(|e| crate::error::Error::plain(e.to_string()))?;
     let tile_size = probe.config().tile_size;
     let texel_bytes = (tile_size as usize + 1).pow(2) * TexelFormat::F16.bytes();
-    Ok(Profile {
-        schema: PROFILE_SCHEMA.into(),
-        scene: opts.scene.clone(),
-        render: ProfileRender {
-            width: w,
-            height: h,
-            spp: settings.spp,
-            scene_spp: scene.spp,
-            pixel_fraction: opts.pixel_fraction,
-            samples: counts.samples,
-            tile_samples: first_samples,
-            threads,
-            wall_s,
-            outside_thread_s,
-            texture_thread_s,
-            tap_thread_s,
-        },
-        cache: CacheGeometry {
-            tile_size,
-            level0_texels_per_uv: f64::from(LEVEL0_TEXELS_PER_UV),
-            max_level: MAX_LEVEL,
-            bytes_per_channel: TexelFormat::F16.bytes() as u32,
-            tile_overhead_bytes: (cache::tile_bytes_for(&node_texture(1), tile_size) - texel_bytes) as u64,
-        },
-        machine: MachineCosts { lookup_ns, fill_ns_per_texel, node_overhead_ns, timer_ns },
-        graphs,
-        streams: pstreams,
+    Ok(CacheGeometry {
+        tile_size,
+        level0_texels_per_uv: f64::from(LEVEL0_TEXELS_PER_UV),
+        max_level: MAX_LEVEL,
+        bytes_per_channel: TexelFormat::F16.bytes() as u32,
+        tile_overhead_bytes: (cache::tile_bytes_for(&node_texture(1), tile_size) - texel_bytes) as u64,
     })
 }
 
