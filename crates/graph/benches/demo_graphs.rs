@@ -18,7 +18,7 @@ fn demo_graphs(c: &mut Criterion) {
         let doc = Document::load(&path).expect("demo graph loads");
         let g = doc.graph();
         let outputs: Vec<_> = (0..g.outputs().len()).map(|i| graph::OutputId(i as u32)).collect();
-        let plan = g.plan(&outputs);
+        let plan = g.eval_order(&outputs);
         let mut scratch = EvalScratch::new(g);
         let mut out = vec![Filtered::constant(Value::float(0.0)); outputs.len()];
         let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
@@ -48,7 +48,7 @@ fn instrumentation_overhead(_: &mut Criterion) {
         let doc = Document::load(&path).expect("demo graph loads");
         let g = doc.graph();
         let outputs: Vec<_> = (0..g.outputs().len()).map(|i| graph::OutputId(i as u32)).collect();
-        let plan = g.plan(&outputs);
+        let plan = g.eval_order(&outputs);
         let mut out = vec![Filtered::constant(Value::float(0.0)); outputs.len()];
         let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
         for sigma in [0.0f32, 1e-3] {

@@ -2,7 +2,7 @@
 //! where a tile cache replaces a node by a lookup), and the evaluation entry points on
 //! [`Graph`].
 //!
-//! Evaluation is demand-driven over a precomputed topological plan: walking the plan backwards
+//! Evaluation is demand-driven over a precomputed topological order: walking it backwards
 //! marks what the requested outputs need, asking the override for each needed node first (a
 //! node it answers cuts off its whole upstream); walking forwards evaluates the rest. Nothing
 //! allocates once the scratch exists.
@@ -57,12 +57,12 @@ impl NodeOverride for NoOverride {
 
 /// The nodes a set of outputs needs, in topological order.
 #[derive(Clone, Debug)]
-pub struct EvalPlan {
+pub struct EvalOrder {
     nodes: Vec<NodeId>,
     outputs: Vec<OutputId>,
 }
 
-impl EvalPlan {
+impl EvalOrder {
     /// The nodes, in topological order.
     pub fn nodes(&self) -> &[NodeId] {
         &self.nodes
@@ -335,38 +335,38 @@ impl EvalScratch {
 }
 
 impl Graph {
-    /// The plan for evaluating `outputs` together.
-    pub fn plan(&self, outputs: &[OutputId]) -> EvalPlan {
+    /// The order in which evaluating `outputs` together visits the nodes.
+    pub fn eval_order(&self, outputs: &[OutputId]) -> EvalOrder {
         let mut nodes: Vec<NodeId> = Vec::new();
         for o in outputs {
             if let Source::Node { node, .. } = self.output(*o).source {
-                nodes.extend_from_slice(self.node_plan(node));
+                nodes.extend_from_slice(self.upstream(node));
             }
         }
         nodes.sort_unstable();
         nodes.dedup();
-        EvalPlan { nodes, outputs: outputs.to_vec() }
+        EvalOrder { nodes, outputs: outputs.to_vec() }
     }
 
-    /// Evaluates the plan's outputs filtered over `fp`, writing them to `out` (one per output).
+    /// Evaluates the order's outputs filtered over `fp`, writing them to `out` (one per output).
     pub fn eval(
         &self,
-        plan: &EvalPlan,
+        order: &EvalOrder,
         fp: &Footprint,
         scratch: &mut EvalScratch,
         ov: &dyn NodeOverride,
         out: &mut [Filtered],
     ) {
-        for &n in &plan.nodes {
+        for &n in &order.nodes {
             scratch.needed[n.0 as usize] = false;
         }
-        for o in &plan.outputs {
+        for o in &order.outputs {
             if let Source::Node { node, .. } = self.output(*o).source {
                 scratch.needed[node.0 as usize] = true;
             }
         }
-        self.run(&plan.nodes, None, fp, scratch, ov);
-        for (slot, o) in out.iter_mut().zip(&plan.outputs) {
+        self.run(&order.nodes, None, fp, scratch, ov);
+        for (slot, o) in out.iter_mut().zip(&order.outputs) {
             let ctx_point = is_point(fp);
             *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
             slot.ty = self.output(*o).ty;
@@ -388,12 +388,12 @@ impl Graph {
     ) -> Filtered {
         let o = self.output(output);
         if let Source::Node { node, .. } = o.source {
-            let plan = self.node_plan(node);
-            for &n in plan {
+            let upstream = self.upstream(node);
+            for &n in upstream {
                 scratch.needed[n.0 as usize] = false;
             }
             scratch.needed[node.0 as usize] = true;
-            self.run(plan, None, fp, scratch, ov);
+            self.run(upstream, None, fp, scratch, ov);
         }
         let mut v = self.resolve(&o.source, fp, is_point(fp), scratch);
         v.ty = o.ty;
@@ -409,18 +409,20 @@ impl Graph {
         scratch: &mut EvalScratch,
         ov: &dyn NodeOverride,
     ) -> Filtered {
-        let plan = self.node_plan(node);
-        for &n in plan {
+        let upstream = self.upstream(node);
+        for &n in upstream {
             scratch.needed[n.0 as usize] = false;
         }
         scratch.needed[node.0 as usize] = true;
-        self.run(plan, Some(node), fp, scratch, ov);
+        self.run(upstream, Some(node), fp, scratch, ov);
         scratch.values[node.0 as usize]
     }
 
+    /// Evaluates what `nodes` (in topological order, each upstream of what was asked for) the
+    /// request needs, asking `ov` first for every node but `direct`.
     fn run(
         &self,
-        plan: &[NodeId],
+        nodes: &[NodeId],
         direct: Option<NodeId>,
         fp: &Footprint,
         scratch: &mut EvalScratch,
@@ -428,10 +430,10 @@ impl Graph {
     ) {
         scratch.order.clear();
         if ov.never_answers() {
-            // Every node of a plan is upstream of what it was made for, so all are needed.
-            scratch.order.extend(plan.iter().rev());
+            // Every node of `nodes` is upstream of what was asked for, so all are needed.
+            scratch.order.extend(nodes.iter().rev());
         } else {
-            for &id in plan.iter().rev() {
+            for &id in nodes.iter().rev() {
                 let i = id.0 as usize;
                 if !scratch.needed[i] {
                     continue;

@@ -60,7 +60,7 @@ pub(crate) struct Node {
     pub reads_gradients: bool,
     pub params: Vec<Param>,
     /// This node and every node it depends on, ascending (= topological order).
-    pub plan: Box<[NodeId]>,
+    pub upstream: Box<[NodeId]>,
     /// Whether its value depends on the shading point through uv alone.
     pub uv_only: bool,
 }
@@ -143,8 +143,8 @@ impl Graph {
     }
 
     /// The nodes that evaluating `id` needs, in topological order (including `id`).
-    pub fn node_plan(&self, id: NodeId) -> &[NodeId] {
-        &self.nodes[id.0 as usize].plan
+    pub fn upstream(&self, id: NodeId) -> &[NodeId] {
+        &self.nodes[id.0 as usize].upstream
     }
 
     /// Whether node `id` depends on the shading point through its uv alone: false when it or
@@ -290,10 +290,11 @@ impl GraphBuilder {
             .map_err(|msg| BuildError::Invalid { node: name.to_string(), message: msg })?;
         uv_only &= !nodes::reads_geometry(&op);
         let id = NodeId(self.nodes.len() as u32);
-        let mut plan: Vec<NodeId> = deps.iter().flat_map(|d| self.nodes[d.0 as usize].plan.iter().copied()).collect();
-        plan.push(id);
-        plan.sort_unstable();
-        plan.dedup();
+        let mut upstream: Vec<NodeId> =
+            deps.iter().flat_map(|d| self.nodes[d.0 as usize].upstream.iter().copied()).collect();
+        upstream.push(id);
+        upstream.sort_unstable();
+        upstream.dedup();
         let consts = srcs
             .iter()
             .map(|s| match s {
@@ -310,7 +311,7 @@ impl GraphBuilder {
             consts,
             reads_gradients: def.category == "heighttonormal",
             params,
-            plan: plan.into_boxed_slice(),
+            upstream: upstream.into_boxed_slice(),
             uv_only,
         });
         self.by_name.insert(name.to_string(), id);

@@ -84,7 +84,7 @@ pub mod value;
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 pub use eval::{
-    BinnedTimings, EvalPlan, EvalScratch, EvalStats, NoOverride, NodeOverride, NonFinite, Work, TIMING_PERIOD,
+    BinnedTimings, EvalOrder, EvalScratch, EvalStats, NoOverride, NodeOverride, NonFinite, Work, TIMING_PERIOD,
 };
 pub use graph::{GeomProp, Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
 pub use matrix::Matrix;

@@ -241,7 +241,7 @@ impl NodeCache {
                     let Some((lo, hi)) = bounds[mi] else { continue };
                     for mg in &m.graphs {
                         let g = graphs[mg.graph as usize].graph();
-                        for &out in mg.plan.outputs() {
+                        for &out in mg.order.outputs() {
                             if let Source::Node { node, .. } = g.output(out).source {
                                 // Outputs that read the surface's geometry are evaluated directly.
                                 if channels(g.node_type(node)).is_some() && g.is_uv_only(node) {
@@ -258,7 +258,7 @@ impl NodeCache {
                 for m in materials {
                     for mg in &m.graphs {
                         let g = graphs[mg.graph as usize].graph();
-                        for &out in mg.plan.outputs() {
+                        for &out in mg.order.outputs() {
                             if let Source::Node { node, .. } = g.output(out).source {
                                 chosen[mg.graph as usize][node.0 as usize] |= worth_caching(g, node);
                             }
@@ -506,7 +506,7 @@ impl GraphSource for CacheAccess<'_> {
         scratch: &mut EvalScratch,
         out: &mut [Filtered],
     ) {
-        g.eval(&request.plan, fp, scratch, &self.for_graph(request.graph), out);
+        g.eval(&request.order, fp, scratch, &self.for_graph(request.graph), out);
     }
 
     /// The statistics of every tile fill's evaluations so far.

@@ -802,8 +802,8 @@ impl Builder {
                 .filter(|(_, (pg, _))| *pg == g)
                 .map(|(slot, (_, out))| (*out, slot as u32))
                 .unzip();
-            let plan = self.graphs[g as usize].graph().plan(&outputs);
-            graphs.push(MaterialGraph { graph: g, plan, slots, stream: 0 });
+            let order = self.graphs[g as usize].graph().eval_order(&outputs);
+            graphs.push(MaterialGraph { graph: g, order, slots, stream: 0 });
         }
         self.pending_outputs.clear();
         let normal_slot = self.pending_normal.take();

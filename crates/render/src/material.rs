@@ -7,7 +7,7 @@
 //! built at a hit.
 
 use crate::bsdf::BsdfDesc;
-use graph::{EvalPlan, EvalScratch, Filtered, Footprint, Graph, NoOverride};
+use graph::{EvalOrder, EvalScratch, Filtered, Footprint, Graph, NoOverride};
 use std::sync::Arc;
 
 /// A procedural graph used by the scene (one per MaterialX document).
@@ -36,8 +36,8 @@ impl SceneGraph {
 pub struct MaterialGraph {
     /// Index into the scene's graphs.
     pub graph: u32,
-    /// Evaluation plan over the outputs.
-    pub plan: EvalPlan,
+    /// The order in which the outputs' nodes are evaluated.
+    pub order: EvalOrder,
     /// For each output of `plan`, the slot its value goes to.
     pub slots: Vec<u32>,
     /// Index of this (material, graph) pair among all the scene's: the request stream a
@@ -75,7 +75,7 @@ impl Material {
             let g = graphs[mg.graph as usize].graph();
             let mut scratch = EvalScratch::new(g);
             let mut tmp = vec![zero; mg.slots.len()];
-            g.eval(&mg.plan, &fp, &mut scratch, &NoOverride, &mut tmp);
+            g.eval(&mg.order, &fp, &mut scratch, &NoOverride, &mut tmp);
             for (k, &slot) in mg.slots.iter().enumerate() {
                 let mut c = tmp[k];
                 for m in c.ch.iter_mut() {

@@ -361,7 +361,7 @@ fn profile_streams(scene: &Scene, tap: &Profiler) -> Vec<Stream> {
         for mg in &m.graphs {
             let g = scene.graphs[mg.graph as usize].graph();
             let outputs = mg
-                .plan
+                .order
                 .outputs()
                 .iter()
                 .filter_map(|&o| match g.output(o).source {

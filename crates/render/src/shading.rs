@@ -54,7 +54,7 @@ impl GraphSource for Direct {
         scratch: &mut EvalScratch,
         out: &mut [Filtered],
     ) {
-        g.eval(&request.plan, fp, scratch, &NoOverride, out);
+        g.eval(&request.order, fp, scratch, &NoOverride, out);
     }
 }
 

@@ -71,7 +71,7 @@ fn plans_evaluate_several_outputs() {
     let d = doc();
     let g = d.graph();
     let outs = [g.output_id("g/out").unwrap(), g.output_id("g/height").unwrap()];
-    let plan = g.plan(&outs);
+    let plan = g.eval_order(&outs);
     assert_eq!(plan.nodes().len(), 5);
     let mut scratch = EvalScratch::new(g);
     let mut vals = [Filtered::zero(ValueType::Float); 2];

@@ -41,7 +41,7 @@ fn all_outputs(g: &Graph) -> Vec<OutputId> {
     (0..g.outputs().len() as u32).map(OutputId).collect()
 }
 
-fn eval_all(g: &Graph, plan: &graph::EvalPlan, fp: &Footprint, scratch: &mut EvalScratch, out: &mut [Filtered]) {
+fn eval_all(g: &Graph, plan: &graph::EvalOrder, fp: &Footprint, scratch: &mut EvalScratch, out: &mut [Filtered]) {
     g.eval(plan, fp, scratch, &NoOverride, out);
 }
 
@@ -100,7 +100,7 @@ fn check(index: usize, b: &Budget, continuous: bool) -> Found {
     let rg = fuzz::random_graph(&mut rng, size, continuous);
     let g = &rg.graph;
     let outs = all_outputs(g);
-    let plan = g.plan(&outs);
+    let plan = g.eval_order(&outs);
     let mut scratch = EvalScratch::new(g);
     let zero = Filtered::zero(graph::ValueType::Float);
     let (mut f, mut p, mut q) = (vec![zero; outs.len()], vec![zero; outs.len()], vec![zero; outs.len()]);
