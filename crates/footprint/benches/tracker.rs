@@ -11,8 +11,8 @@
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use footprint::{
-    constraint_derivatives, first_vertex_variance, half_vector_variance, lod, ConstraintDerivatives, Footprint,
-    FootprintTracker, PbrtDifferentials, RayCone, Scatter, Vertex,
+    constraint_derivatives, first_vertex_variance, half_vector_variance, lod, ConstraintDerivatives, FootprintTracker,
+    PbrtDifferentials, RayCone, Scatter, Vertex, VertexFootprint,
 };
 use glam::{DMat2, DVec2, DVec3};
 use std::f64::consts::PI;
@@ -285,7 +285,7 @@ fn benches(c: &mut Criterion) {
         b.iter(|| {
             which = (which + 1) % footprints.len();
             let (cov, v) = &footprints[which];
-            let fp = Footprint::new(black_box(*cov), black_box(v));
+            let fp = VertexFootprint::new(black_box(*cov), black_box(v));
             fp.lod(black_box(1024.0))
         })
     });

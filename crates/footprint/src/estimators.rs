@@ -1,6 +1,6 @@
 //! Comparison estimators for `--footprint raycone|pbrt`: simple, documented re-implementations
 //! with the same per-bounce shape as [`crate::FootprintTracker`]. Both ignore roughness; both
-//! return tangent-plane covariances so that [`crate::Footprint`] and [`crate::lod`] apply as
+//! return tangent-plane covariances so that [`crate::VertexFootprint`] and [`crate::lod`] apply as
 //! for the covariance tracker.
 
 use glam::{DMat2, DVec2, DVec3};

@@ -22,7 +22,7 @@
 //!    [`ggx_to_beckmann_alpha`]); it forms the half-vector constraint derivatives
 //!    `A_i, B_i, C_i` ([`constraint_derivatives`], [`ConstraintDerivatives`]) and returns
 //!    `var(Δx_{i+1})`. [`FootprintTracker::step`] is the same update from given matrices.
-//! 4. At the boundary, [`Footprint::new`] gives the world-space covariance `T Σ Tᵀ`
+//! 4. At the boundary, [`VertexFootprint::new`] gives the world-space covariance `T Σ Tᵀ`
 //!    ([`world_covariance`]) and the uv covariance `J_uv Σ J_uvᵀ` ([`uv_covariance`]);
 //!    [`lod`] maps a uv covariance to a continuous mip level.
 //!
@@ -41,7 +41,7 @@
 //! let x2 = Vertex { uv: DVec2::new(0.3, 0.7), ..Vertex::on_plane(DVec3::new(0.0, 6.0, -2.0), -DVec3::Y) };
 //! let alpha = ggx_to_beckmann_alpha(0.2) as f64;
 //! let var_x2 = tracker.advance(&x2, Scatter::Reflection, half_vector_variance(alpha));
-//! let fp = Footprint::new(var_x2, &x2);
+//! let fp = VertexFootprint::new(var_x2, &x2);
 //! let level = fp.lod(1024.0); // texels per uv unit at level 0
 //! assert!(fp.world_major_sigma() > 0.0 && level.is_finite());
 //! ```
@@ -72,7 +72,7 @@ pub use constraint::{
     half_vector_variance, half_vector_variance_aniso, ConstraintDerivatives, GGX_TO_BECKMANN,
 };
 pub use estimators::{pixel_spread_angle, PbrtDifferentials, RayCone};
-pub use texture::{lod, tangent_covariance, uv_covariance, world_covariance, Footprint, LOD_MAX, LOD_MIN};
+pub use texture::{lod, tangent_covariance, uv_covariance, world_covariance, VertexFootprint, LOD_MAX, LOD_MIN};
 pub use tracker::FootprintTracker;
 pub use vertex::{orthonormal_basis, LocalGeometry, Scatter, Vertex};
 

@@ -52,7 +52,7 @@ pub fn lod(cov_uv: DMat2, texels_per_uv_unit: f64) -> f32 {
 
 /// A footprint at one vertex as the boundary sees it: tangent-plane, world and uv covariances.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Footprint {
+pub struct VertexFootprint {
     /// 2×2 covariance of `Δx` in the vertex's shading tangent frame `(t, b)`.
     pub tangent: DMat2,
     /// 3×3 world-space covariance `T Σ Tᵀ`.
@@ -61,10 +61,10 @@ pub struct Footprint {
     pub uv: DMat2,
 }
 
-impl Footprint {
+impl VertexFootprint {
     /// Gathers the boundary forms of the tangent-plane footprint `cov` at `v`.
     pub fn new(cov: DMat2, v: &Vertex) -> Self {
-        Footprint { tangent: cov, world: world_covariance(cov, v), uv: uv_covariance(cov, v) }
+        VertexFootprint { tangent: cov, world: world_covariance(cov, v), uv: uv_covariance(cov, v) }
     }
 
     /// [`lod`] of the uv covariance.

@@ -379,11 +379,7 @@ impl NodeCache {
 
     /// The cache for a plan (as [`Strategy::Plan`] reads from a file); `None` when the plan
     /// caches nothing.
-    pub fn from_plan(
-        scene: &Scene,
-        plan: &plan::PlanFile,
-        budget_bytes: usize,
-    ) -> Result<Option<NodeCache>> {
+    pub fn from_plan(scene: &Scene, plan: &plan::PlanFile, budget_bytes: usize) -> Result<Option<NodeCache>> {
         let graphs = &scene.graphs[..];
         let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
         let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
@@ -588,7 +584,10 @@ mod tests {
                 let fine = footprint::lod(*c, density);
                 let coarse = cache::level_for(c.as_mat2(), density as f32);
                 // f32 covariances keep ~7 digits: the levels agree to ~1e-6 × log2 of the scale.
-                assert!((fine - coarse).abs() <= 1e-4 || fine == coarse, "cov {c} density {density}: {fine} vs {coarse}");
+                assert!(
+                    (fine - coarse).abs() <= 1e-4 || fine == coarse,
+                    "cov {c} density {density}: {fine} vs {coarse}"
+                );
             }
         }
     }

@@ -130,9 +130,9 @@ use crate::camera::{Camera, FovAxis, Rfilter};
 use crate::emitter::{Emitter, EnvMap};
 use crate::error::Result;
 use crate::geometry::{mesh_area_distribution, Accel, Shape, ShapeGeometry};
+use crate::material::{Material, MaterialGraph, SceneGraph};
 use crate::mesh::{cube_mesh, rectangle_mesh, TriangleMesh};
 use crate::scene::{PathSettings, Scene};
-use crate::material::{Material, MaterialGraph, SceneGraph};
 use crate::texture::{Bitmap, Texture, WrapMode};
 use crate::xml::{self, Object};
 use glam::{Affine2, Affine3A, Mat3, Mat4, Vec2, Vec3};
@@ -993,4 +993,3 @@ fn mesh_geometry(obj: &Object, mut mesh: TriangleMesh, to_world: Mat4) -> Result
     let area = mesh_area_distribution(&mesh).ok_or_else(|| obj.error("shape has zero surface area"))?;
     Ok(ShapeGeometry::Mesh { mesh, area })
 }
-

@@ -45,7 +45,8 @@ fn module_imports() -> BTreeMap<String, BTreeSet<String>> {
 /// The first segment of every `crate::` path in `code`, and of every path in a
 /// `crate::{...}` group (at the group's top level).
 fn crate_paths(code: &str) -> Vec<String> {
-    let ident = |s: &str| -> String { s.trim_start().chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect() };
+    let ident =
+        |s: &str| -> String { s.trim_start().chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect() };
     let mut out = Vec::new();
     for (i, _) in code.match_indices("crate::") {
         let rest = &code[i + "crate::".len()..];

@@ -4,7 +4,7 @@
 //! filter (σ = ½ px) by the camera's ray differentials; at every later hit it advances by the
 //! estimator the user chose ([`FootprintMode`]): Algorithm 1 of the supplemental (default), ray
 //! cones, pbrt-v4-style differentials, or none (point sampling). The result at each vertex is a
-//! [`footprint::Footprint`]: the 2×2 tangent-plane covariance, the world 3×3 `T Σ Tᵀ` and the uv
+//! [`footprint::VertexFootprint`]: the 2×2 tangent-plane covariance, the world 3×3 `T Σ Tᵀ` and the uv
 //! covariance.
 
 use crate::bsdf::{lobe_alpha, Bsdf, BsdfModel, BsdfSample, LobeKind};

@@ -1,9 +1,9 @@
 //! Tile caching of graph nodes: cached renders against uncached ones, determinism under any
 //! thread count and budget, and bad strategy input.
 
+use render::caching::render_cached;
 use render::caching::{NodeCache, Strategy};
 use render::film::{relative_mse, Image};
-use render::caching::render_cached;
 use render::integrator::RenderSettings;
 use render::scene::Scene;
 use std::path::PathBuf;

@@ -5,8 +5,8 @@
 
 use plan::profile::SceneId;
 use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, Target};
-use render::caching::{NodeCache, Strategy};
 use render::caching::render_cached;
+use render::caching::{NodeCache, Strategy};
 use render::integrator::{FilterScale, RenderSettings};
 use render::profiling::{profile, ProfileOptions};
 use render::scene::Scene;

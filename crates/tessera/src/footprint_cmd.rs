@@ -62,7 +62,7 @@ impl PathObserver for Recorder {
             "uv": [si.uv.x, si.uv.y],
         });
         if let Some(vx) = vertex {
-            let fp = footprint::Footprint::new(var, vx);
+            let fp = footprint::VertexFootprint::new(var, vx);
             let w = fp.world;
             v["cov_world"] = json!([
                 [w.x_axis.x, w.y_axis.x, w.z_axis.x],

@@ -351,11 +351,8 @@ fn spec_of_stats(profile: &Profile, v: &RenderStats) -> Result<PlanSpec> {
         let mut found = false;
         for (g, graph) in profile.graphs.iter().enumerate() {
             if let Some(n) = graph.nodes.iter().position(|n| n.name == *name) {
-                let min = v
-                    .plan
-                    .as_ref()
-                    .and_then(|p| p.nodes.iter().find(|p| p.node == *name))
-                    .map_or(0, |p| p.min_level);
+                let min =
+                    v.plan.as_ref().and_then(|p| p.nodes.iter().find(|p| p.node == *name)).map_or(0, |p| p.min_level);
                 spec.cached[g][n] = Some(min);
                 found = true;
             }

@@ -137,7 +137,7 @@ fn alpha_zero_chain_with_zero_start_stays_zero() {
     for v in [&b, &c] {
         let cov = tr.advance(v, Scatter::Reflection, half_vector_variance(0.0));
         assert_eq!(cov, DMat2::ZERO);
-        let f = Footprint::new(cov, v);
+        let f = VertexFootprint::new(cov, v);
         assert_eq!(f.world, glam::DMat3::ZERO);
         assert_eq!(f.uv, DMat2::ZERO);
         assert_eq!(f.lod(1024.0), LOD_MIN);
@@ -153,7 +153,7 @@ fn enormous_inputs_are_clamped() {
     let v = tr.advance(&far, Scatter::Reflection, half_vector_variance(1e30));
     assert!(finite_psd_bounded(v));
     assert!(major(v) > 0.99 * MAX_VARIANCE);
-    let f = Footprint::new(v, &far);
+    let f = VertexFootprint::new(v, &far);
     assert!(f.world.is_finite());
     assert_eq!(f.lod(1e6), LOD_MAX);
     // Roughness inputs.

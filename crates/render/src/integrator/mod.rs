@@ -408,4 +408,3 @@ pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
     }
     sum / samples.max(1) as f32
 }
-
