@@ -349,6 +349,59 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         Some(throughput * f * es.value * tr * (w / light_pdf))
     }
 
+    /// How a path crosses hit `si` of `material` (a path of weight `throughput`, updated): a
+    /// partly transparent surface is scattered at with probability `p` = the mean opacity `o`
+    /// (weight `o/p`) or passed through (weight `(1 − o)/(1 − p)`), drawing a random number only
+    /// when `p` is strictly between 0 and 1; an opaque one is scattered at. When the opacity was
+    /// evaluated, the BSDF built from the same texture values comes with the answer.
+    fn cross(
+        &mut self,
+        material: &'a Material,
+        si: &SurfaceInteraction,
+        tf: &TextureFootprint,
+        rng: &mut Rng,
+        throughput: &mut Spectrum,
+    ) -> Crossing {
+        if !material.bsdf.is_masked() {
+            return Crossing::Scatter { pdf: 1.0, shaded: None };
+        }
+        let outputs = self.material_outputs(material, si, tf);
+        let ctx = ShadeContext { uv: si.uv, outputs };
+        let o = material.bsdf.opacity(&ctx);
+        let p = (o.x + o.y + o.z) / 3.0;
+        let scatter = p >= 1.0 || (p > 0.0 && rng.next_f32() < p);
+        if !scatter {
+            *throughput *= (Spectrum::ONE - o) / (1.0 - p);
+            return Crossing::PassThrough;
+        }
+        let mut pdf = 1.0;
+        if p < 1.0 {
+            *throughput *= o / p;
+            pdf = p;
+        }
+        Crossing::Scatter { pdf, shaded: Some(shade_bsdf(material, si, &ctx)) }
+    }
+
+    /// The light of `emitter` (the hit shape's, if it has one) met by chance at `si` along `d`,
+    /// times the path's `throughput` and the MIS weight against next-event estimation; area
+    /// lights emit on the side their normal faces.
+    fn emitted(
+        &self,
+        emitter: Option<u32>,
+        si: &SurfaceInteraction,
+        d: Vec3,
+        last: &LastScatter,
+        throughput: Spectrum,
+    ) -> Option<Spectrum> {
+        let e = &self.scene.emitters[emitter? as usize];
+        let Emitter::Area { radiance, .. } = e else { return None };
+        if !(si.sh.n.dot(-d) > 0.0) {
+            return None;
+        }
+        let w = self.met_weight(last, || e.pdf(&self.scene.shapes, last.p, si.p, si.sh.n, d));
+        Some(throughput * *radiance * w)
+    }
+
     /// The MIS weight of emitter `e`'s light met by chance along a ray from `last`, whose
     /// density for that direction `e` gives as `emitter_pdf` per chosen emitter.
     #[inline]
@@ -358,6 +411,24 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         } else {
             mis(last.pdf, self.select_pdf * emitter_pdf())
         }
+    }
+}
+
+/// How a path crosses a surface ([`Tracer::cross`]).
+enum Crossing {
+    /// It scatters here; the BSDF strategy's density is `pdf` times the BSDF's, and `shaded` is
+    /// the BSDF and frame already built when the opacity needed the textures.
+    Scatter { pdf: f32, shaded: Option<(Bsdf, Frame)> },
+    /// It continues past the surface.
+    PassThrough,
+}
+
+/// What the path did at a vertex whose BSDF sampled `bs`.
+fn event_of(bs: &BsdfSample) -> Event {
+    match (bs.kind, bs.transmitted) {
+        (_, true) => Event::Refract,
+        (LobeKind::Diffuse, false) => Event::Diffuse,
+        _ => Event::Reflect,
     }
 }
 
@@ -431,26 +502,13 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         let material = &scene.materials[shape.material as usize];
         // The footprint here; the path keeps it only if it scatters here.
         let here = footprints.arrive(scene, &settings, cam, &si, ray.d);
-        if let Some(ei) = shape.emitter {
-            let e = &scene.emitters[ei as usize];
-            if let Emitter::Area { radiance, .. } = e {
-                if si.sh.n.dot(-ray.d) > 0.0 {
-                    let w = tracer.met_weight(&last, || e.pdf(&scene.shapes, last.p, si.p, si.sh.n, ray.d));
-                    result += throughput * *radiance * w;
-                }
-            }
+        if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {
+            result += l;
         }
         // Partial opacity: scatter here (probability `p`) or pass straight through.
-        let mut scatter_pdf = 1.0f32;
-        let mut shaded = None;
-        if material.bsdf.is_masked() {
-            let outputs = tracer.material_outputs(material, &si, &here.texture);
-            let ctx = ShadeContext { uv: si.uv, outputs };
-            let o = material.bsdf.opacity(&ctx);
-            let p = (o.x + o.y + o.z) / 3.0;
-            let scatter = p >= 1.0 || (p > 0.0 && rng.next_f32() < p);
-            if !scatter {
-                throughput *= (Spectrum::ONE - o) / (1.0 - p);
+        let (scatter_pdf, shaded) = match tracer.cross(material, &si, &here.texture, rng, &mut throughput) {
+            Crossing::Scatter { pdf, shaded } => (pdf, shaded),
+            Crossing::PassThrough => {
                 passes += 1;
                 if passes > MAX_PASS_THROUGH || max_component(throughput) <= 0.0 {
                     break;
@@ -458,12 +516,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
                 ray.tmin = past(&si, hit.t);
                 continue;
             }
-            if p < 1.0 {
-                throughput *= o / p;
-                scatter_pdf = p;
-            }
-            shaded = Some(shade_bsdf(material, &si, &ctx));
-        }
+        };
         passes = 0;
         footprints.scatter_at(&here);
         let vertex = here.texture.vertex.as_ref();
@@ -504,12 +557,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
             obs.event(depth, ended, 0.0, 1.0);
             break;
         }
-        let event = match (bs.kind, bs.transmitted) {
-            (_, true) => Event::Refract,
-            (LobeKind::Diffuse, false) => Event::Diffuse,
-            _ => Event::Reflect,
-        };
-        obs.event(depth, event, bs.alpha, bs.eta);
+        obs.event(depth, event_of(&bs), bs.alpha, bs.eta);
         throughput *= bs.weight;
         eta *= bs.eta;
         last = LastScatter { p: si.p, pdf: bs.pdf * scatter_pdf, delta: matches!(bs.kind, LobeKind::Specular) };
