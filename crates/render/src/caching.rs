@@ -211,15 +211,122 @@ fn material_uv_bounds(scene: &Scene) -> Vec<Option<UvRect>> {
     b
 }
 
+/// Which nodes of each scene graph a strategy caches, with their finest cached levels and,
+/// for bakes, the uv rectangle each must cover.
+struct Selection {
+    chosen: Vec<Vec<bool>>,
+    min_level: Vec<Vec<u8>>,
+    rects: Vec<Vec<Option<UvRect>>>,
+}
+
+impl Selection {
+    /// Nothing chosen.
+    fn empty(graphs: &[SceneGraph]) -> Selection {
+        fn per_node<T: Clone>(graphs: &[SceneGraph], v: T) -> Vec<Vec<T>> {
+            graphs.iter().map(|g| vec![v.clone(); g.graph().node_count()]).collect()
+        }
+        Selection { chosen: per_node(graphs, false), min_level: per_node(graphs, 0), rects: per_node(graphs, None) }
+    }
+
+    /// `bake:RES`: every bound output that depends on uv alone, over its materials' shapes' uv
+    /// rectangles.
+    fn bake_outputs(&mut self, scene: &Scene) {
+        let (graphs, materials) = (&scene.graphs[..], &scene.materials[..]);
+        let bounds = material_uv_bounds(scene);
+        for (mi, m) in materials.iter().enumerate() {
+            let Some((lo, hi)) = bounds[mi] else { continue };
+            for mg in &m.graphs {
+                let g = graphs[mg.graph as usize].graph();
+                for &out in mg.order.outputs() {
+                    if let Source::Node { node, .. } = g.output(out).source {
+                        // Outputs that read the surface's geometry are evaluated directly.
+                        if channels(g.node_type(node)).is_some() && g.is_uv_only(node) {
+                            self.chosen[mg.graph as usize][node.0 as usize] = true;
+                            let r = &mut self.rects[mg.graph as usize][node.0 as usize];
+                            *r = union(*r, lo, hi);
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `outputs`: the nodes the materials read, where caching can pay.
+    fn outputs(&mut self, graphs: &[SceneGraph], materials: &[crate::material::Material]) {
+        for m in materials {
+            for mg in &m.graphs {
+                let g = graphs[mg.graph as usize].graph();
+                for &out in mg.order.outputs() {
+                    if let Source::Node { node, .. } = g.output(out).source {
+                        self.chosen[mg.graph as usize][node.0 as usize] |= worth_caching(g, node);
+                    }
+                }
+            }
+        }
+    }
+
+    /// `all`: every node where caching can pay.
+    fn all(&mut self, graphs: &[SceneGraph]) {
+        for (gi, sg) in graphs.iter().enumerate() {
+            for id in sg.graph().node_ids() {
+                self.chosen[gi][id.0 as usize] = worth_caching(sg.graph(), id);
+            }
+        }
+    }
+
+    /// `nodes:a,b,c`: the named nodes (`nodegraph/node`, or `node` when unique); errors name
+    /// what is missing, ambiguous or not cacheable.
+    fn named(&mut self, graphs: &[SceneGraph], names: &[String]) -> Result<()> {
+        for name in names {
+            let mut found = Vec::new();
+            for (gi, sg) in graphs.iter().enumerate() {
+                let g = sg.graph();
+                for id in g.node_ids() {
+                    let full = g.node_name(id);
+                    if full == name || full.rsplit('/').next() == Some(name.as_str()) {
+                        found.push((gi, id));
+                    }
+                }
+            }
+            match found.as_slice() {
+                [(gi, id)] => {
+                    if channels(graphs[*gi].graph().node_type(*id)).is_none() {
+                        return Err(Error::plain(format!("node '{name}' has 4 channels; the cache stores at most 3")));
+                    }
+                    if !graphs[*gi].graph().is_uv_only(*id) {
+                        return Err(Error::plain(format!(
+                            "--strategy nodes: node '{name}' depends on the surface's position or frame \
+                             (position, normal, tangent, bitangent or a 3D noise upstream), not on uv alone; \
+                             it cannot be cached as a texture over uv"
+                        )));
+                    }
+                    self.chosen[*gi][id.0 as usize] = true;
+                }
+                [] => {
+                    let all: Vec<&str> =
+                        graphs.iter().flat_map(|g| g.graph().node_ids().map(|id| g.graph().node_name(id))).collect();
+                    return Err(Error::plain(format!(
+                        "--strategy nodes: no node named '{name}' (nodes: {})",
+                        all.join(", ")
+                    )));
+                }
+                _ => {
+                    return Err(Error::plain(format!(
+                        "--strategy nodes: '{name}' names several nodes; use the full name nodegraph/node"
+                    )))
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 impl NodeCache {
     /// Builds the cache for `strategy` within `budget_bytes`; `None` for [`Strategy::None`].
     /// For [`Strategy::Bake`] the textures are filled before this returns.
     pub fn new(scene: &Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
-        let (graphs, materials) = (&scene.graphs[..], &scene.materials[..]);
-        let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
-        let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
-        // For bakes: the uv rectangle each output node must cover.
-        let mut rects: Vec<Vec<Option<UvRect>>> = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
+        let graphs = &scene.graphs[..];
+        let mut sel = Selection::empty(graphs);
         match strategy {
             Strategy::None => return Ok(None),
             Strategy::Auto => {
@@ -232,99 +339,19 @@ impl NodeCache {
                     .map_err(|e| Error::plain(format!("{}: cannot read the plan file: {e}", path.display())))?;
                 let plan =
                     plan::PlanFile::from_json(&text).map_err(|e| Error::plain(format!("{}: {e}", path.display())))?;
-                select_plan(graphs, &plan, &mut chosen, &mut min_level)
+                select_plan(graphs, &plan, &mut sel.chosen, &mut sel.min_level)
                     .map_err(|e| Error::plain(format!("{}: {e}", path.display())))?;
             }
-            Strategy::Bake(_) => {
-                let bounds = material_uv_bounds(scene);
-                for (mi, m) in materials.iter().enumerate() {
-                    let Some((lo, hi)) = bounds[mi] else { continue };
-                    for mg in &m.graphs {
-                        let g = graphs[mg.graph as usize].graph();
-                        for &out in mg.order.outputs() {
-                            if let Source::Node { node, .. } = g.output(out).source {
-                                // Outputs that read the surface's geometry are evaluated directly.
-                                if channels(g.node_type(node)).is_some() && g.is_uv_only(node) {
-                                    chosen[mg.graph as usize][node.0 as usize] = true;
-                                    let r = &mut rects[mg.graph as usize][node.0 as usize];
-                                    *r = union(*r, lo, hi);
-                                }
-                            }
-                        }
-                    }
-                }
-            }
-            Strategy::Outputs => {
-                for m in materials {
-                    for mg in &m.graphs {
-                        let g = graphs[mg.graph as usize].graph();
-                        for &out in mg.order.outputs() {
-                            if let Source::Node { node, .. } = g.output(out).source {
-                                chosen[mg.graph as usize][node.0 as usize] |= worth_caching(g, node);
-                            }
-                        }
-                    }
-                }
-            }
-            Strategy::All => {
-                for (gi, sg) in graphs.iter().enumerate() {
-                    for id in sg.graph().node_ids() {
-                        chosen[gi][id.0 as usize] = worth_caching(sg.graph(), id);
-                    }
-                }
-            }
-            Strategy::Nodes(names) => {
-                for name in names {
-                    let mut found = Vec::new();
-                    for (gi, sg) in graphs.iter().enumerate() {
-                        let g = sg.graph();
-                        for id in g.node_ids() {
-                            let full = g.node_name(id);
-                            if full == name || full.rsplit('/').next() == Some(name.as_str()) {
-                                found.push((gi, id));
-                            }
-                        }
-                    }
-                    match found.as_slice() {
-                        [(gi, id)] => {
-                            if channels(graphs[*gi].graph().node_type(*id)).is_none() {
-                                return Err(Error::plain(format!(
-                                    "node '{name}' has 4 channels; the cache stores at most 3"
-                                )));
-                            }
-                            if !graphs[*gi].graph().is_uv_only(*id) {
-                                return Err(Error::plain(format!(
-                                    "--strategy nodes: node '{name}' depends on the surface's position or frame \
-                                     (position, normal, tangent, bitangent or a 3D noise upstream), not on uv alone; \
-                                     it cannot be cached as a texture over uv"
-                                )));
-                            }
-                            chosen[*gi][id.0 as usize] = true;
-                        }
-                        [] => {
-                            let all: Vec<&str> = graphs
-                                .iter()
-                                .flat_map(|g| g.graph().node_ids().map(|id| g.graph().node_name(id)))
-                                .collect();
-                            return Err(Error::plain(format!(
-                                "--strategy nodes: no node named '{name}' (nodes: {})",
-                                all.join(", ")
-                            )));
-                        }
-                        _ => {
-                            return Err(Error::plain(format!(
-                                "--strategy nodes: '{name}' names several nodes; use the full name nodegraph/node"
-                            )))
-                        }
-                    }
-                }
-            }
+            Strategy::Bake(_) => sel.bake_outputs(scene),
+            Strategy::Outputs => sel.outputs(graphs, &scene.materials),
+            Strategy::All => sel.all(graphs),
+            Strategy::Nodes(names) => sel.named(graphs, names)?,
         }
         let bake = match strategy {
             Strategy::Bake(res) => Some(*res),
             _ => None,
         };
-        NodeCache::build(graphs, bake, chosen, min_level, rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, bake, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
     }
 
     /// The cache for the chosen nodes; with `bake` (texels across each uv rectangle), the baked
@@ -381,14 +408,12 @@ impl NodeCache {
     /// caches nothing.
     pub fn from_plan(scene: &Scene, plan: &plan::PlanFile, budget_bytes: usize) -> Result<Option<NodeCache>> {
         let graphs = &scene.graphs[..];
-        let mut chosen: Vec<Vec<bool>> = graphs.iter().map(|g| vec![false; g.graph().node_count()]).collect();
-        let mut min_level: Vec<Vec<u8>> = graphs.iter().map(|g| vec![0; g.graph().node_count()]).collect();
-        select_plan(graphs, plan, &mut chosen, &mut min_level).map_err(Error::plain)?;
-        if chosen.iter().flatten().all(|c| !c) {
+        let mut sel = Selection::empty(graphs);
+        select_plan(graphs, plan, &mut sel.chosen, &mut sel.min_level).map_err(Error::plain)?;
+        if sel.chosen.iter().flatten().all(|c| !c) {
             return Ok(None);
         }
-        let rects = graphs.iter().map(|g| vec![None; g.graph().node_count()]).collect();
-        NodeCache::build(graphs, None, chosen, min_level, rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, None, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
     }
 
     /// Fills every tile of every level of the baked textures over their uv rectangles.
