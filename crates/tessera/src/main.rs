@@ -6,7 +6,6 @@ mod bench;
 mod flip;
 mod footprint_cmd;
 mod heatmap;
-mod report;
 mod select_cmd;
 mod svg;
 
