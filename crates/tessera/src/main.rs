@@ -6,7 +6,6 @@ mod bench;
 mod flip;
 mod footprint_cmd;
 mod heatmap;
-mod report;
 mod select_cmd;
 mod svg;
 
@@ -14,12 +13,12 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use render::caching::{render_cached, NodeCache, Strategy};
-use render::integrator::{RenderSettings, AOV_NO_VERTEX};
+use render::integrator::{RenderOutput, RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
 use render::stats::{
-    CacheReport, GraphStats, NonFiniteNode, NonFiniteOrigin, NonFiniteSampleStats, NonFiniteStats, Phases,
-    RenderStats, Throughput, STATS_SCHEMA,
+    CacheReport, GraphStats, NonFiniteNode, NonFiniteOrigin, NonFiniteSampleStats, NonFiniteStats, Phases, RenderStats,
+    Throughput, STATS_SCHEMA,
 };
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -151,7 +150,51 @@ pub(crate) fn parse_defines(defs: &[String]) -> Result<Vec<(String, String)>> {
         .collect()
 }
 
+/// `tessera render`: loads and renders the scene, writes the images, then reports what was asked for.
 fn run_render(args: RenderArgs) -> Result<()> {
+    let defines = check_render_args(&args)?;
+    let t_load = Instant::now();
+    let scene = load_scene(args.scene.as_deref(), &defines)?;
+    let load_s = t_load.elapsed().as_secs_f64();
+    let job = RenderJob::new(&args, &scene)?;
+    let r = render(&job, &scene, &defines)?;
+    let nonfinite = NonFiniteReport::of(&scene, &r.out);
+    if args.strict && !nonfinite.is_clean() {
+        bail!("--strict: {}; nothing was written", nonfinite.message());
+    }
+
+    let t_write = Instant::now();
+    let aov_files = write_images(&job.outputs, &r.out)?;
+    let write_s = t_write.elapsed().as_secs_f64();
+    let render_s = r.out.time.as_secs_f64();
+    if !args.quiet {
+        print_summary(&job, &scene, &r, &aov_files);
+    }
+    // Never quiet: a wrong value is reported even with --quiet.
+    if !nonfinite.is_clean() {
+        eprintln!("warning: {}", nonfinite.message());
+    }
+    if let Some(path) = &args.stats_json {
+        let phases = Phases { load_s, cache_setup_s: r.cache_setup_s, render_s, write_s };
+        write_stats(path, &job, &scene, &r, &nonfinite, &aov_files, phases)?;
+    }
+    if let Some(a) = &r.auto {
+        let dir = args.report.clone().unwrap_or_else(|| {
+            let stem = job.outputs[0].with_extension("");
+            PathBuf::from(format!("{}.report", stem.display()))
+        });
+        let measured = select_cmd::measured_of_render(&r.out.graph_stats, r.node_cache.as_ref(), render_s);
+        let comparison = a.write_report(&dir, measured)?;
+        if !args.quiet {
+            eprintln!("{comparison}");
+            eprintln!("report: {}", dir.display());
+        }
+    }
+    Ok(())
+}
+
+/// The checks of `tessera render`'s arguments that need no scene; returns the parsed defines.
+fn check_render_args(args: &RenderArgs) -> Result<Vec<(String, String)>> {
     let defines = parse_defines(&args.define)?;
     if !(args.aov_density.is_finite() && args.aov_density > 0.0) {
         bail!("--aov-density must be a positive number, got {}", args.aov_density);
@@ -159,35 +202,79 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if let Some(0) = args.threads {
         bail!("--threads must be at least 1");
     }
-    let t_load = Instant::now();
-    let scene = load_scene(args.scene.as_deref(), &defines)?;
-    let load_s = t_load.elapsed().as_secs_f64();
-    let spp = args.spp.unwrap_or(scene.spp);
-    if spp == 0 || spp > 1 << 24 {
-        bail!("--spp must be between 1 and {}, got {spp}", 1 << 24);
-    }
-    let seed = args.seed.unwrap_or(scene.seed);
-    let outputs: Vec<PathBuf> = match &args.out {
-        Some(p) => vec![p.clone()],
-        None => {
-            let stem = args
-                .scene
-                .as_ref()
-                .and_then(|p| p.file_stem())
-                .map(|s| s.to_string_lossy().into_owned())
-                .unwrap_or_else(|| "tessera".into());
-            vec![PathBuf::from(format!("{stem}.exr")), PathBuf::from(format!("{stem}.png"))]
-        }
-    };
-    for o in &outputs {
-        let ext = o.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        if ext != "exr" && ext != "png" {
-            bail!("{}: unsupported output format (expected .exr or .png)", o.display());
-        }
-    }
+    Ok(defines)
+}
 
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
+/// A render to do: the arguments checked against the scene, what they resolve to, and the
+/// worker pool it runs on.
+struct RenderJob<'a> {
+    args: &'a RenderArgs,
+    spp: u32,
+    seed: u64,
+    /// The images to write; the AOV files and the auto report are named after the first.
+    outputs: Vec<PathBuf>,
+    threads: usize,
+    pool: rayon::ThreadPool,
+    settings: RenderSettings,
+    /// The tile cache's budget, bytes.
+    budget: usize,
+}
+
+impl<'a> RenderJob<'a> {
+    /// Resolves the samples, seed, outputs and threads (the scene's where the arguments give
+    /// none) and checks the rest of the arguments.
+    fn new(args: &'a RenderArgs, scene: &Scene) -> Result<RenderJob<'a>> {
+        let spp = args.spp.unwrap_or(scene.spp);
+        if spp == 0 || spp > 1 << 24 {
+            bail!("--spp must be between 1 and {}, got {spp}", 1 << 24);
+        }
+        let seed = args.seed.unwrap_or(scene.seed);
+        let outputs: Vec<PathBuf> = match &args.out {
+            Some(p) => vec![p.clone()],
+            None => {
+                let stem = args
+                    .scene
+                    .as_ref()
+                    .and_then(|p| p.file_stem())
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_else(|| "tessera".into());
+                vec![PathBuf::from(format!("{stem}.exr")), PathBuf::from(format!("{stem}.png"))]
+            }
+        };
+        for o in &outputs {
+            let ext = o.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+            if ext != "exr" && ext != "png" {
+                bail!("{}: unsupported output format (expected .exr or .png)", o.display());
+            }
+        }
+
+        let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let pool =
+            rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
+        let want_aov = args.aov.iter().any(|a| a == "footprint");
+        if want_aov && args.footprint == FootprintMode::None {
+            bail!("--aov footprint needs a footprint estimator (not --footprint none)");
+        }
+        let settings = RenderSettings {
+            footprint: args.footprint,
+            footprint_aov_density: want_aov.then_some(args.aov_density),
+            free_textures: args.free_textures,
+            filter_scale: args.filter_scale,
+            ..RenderSettings::new(spp, seed)
+        };
+        if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
+            bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", args.budget_mb);
+        }
+        let budget = (args.budget_mb * 1048576.0) as usize;
+        if !(args.profile_share > 0.0 && args.profile_share <= 1.0) {
+            bail!("--profile-share must be in (0, 1], got {}", args.profile_share);
+        }
+        Ok(RenderJob { args, spp, seed, outputs, threads, pool, settings, budget })
+    }
+}
+
+/// The progress bar over the image's pixels: drawn on a terminal unless --quiet, hidden otherwise.
+fn progress_bar(args: &RenderArgs, scene: &Scene) -> ProgressBar {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let show = !args.quiet && std::io::stderr().is_terminal();
     let bar = ProgressBar::with_draw_target(
@@ -199,45 +286,43 @@ fn run_render(args: RenderArgs) -> Result<()> {
             .expect("valid template")
             .progress_chars("=> "),
     );
-    let want_aov = args.aov.iter().any(|a| a == "footprint");
-    if want_aov && args.footprint == FootprintMode::None {
-        bail!("--aov footprint needs a footprint estimator (not --footprint none)");
-    }
-    let settings = RenderSettings {
-        footprint: args.footprint,
-        footprint_aov_density: want_aov.then_some(args.aov_density),
-        free_textures: args.free_textures,
-        filter_scale: args.filter_scale,
-        ..RenderSettings::new(spp, seed)
-    };
-    if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
-        bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", args.budget_mb);
-    }
-    let budget = (args.budget_mb * 1048576.0) as usize;
-    if !(args.profile_share > 0.0 && args.profile_share <= 1.0) {
-        bail!("--profile-share must be in (0, 1], got {}", args.profile_share);
-    }
+    bar
+}
+
+/// A finished render: its output, and the plan and the tile cache it used.
+struct Rendered {
+    out: RenderOutput,
+    node_cache: Option<NodeCache>,
+    auto: Option<select_cmd::AutoPlan>,
+    cache_setup_s: f64,
+}
+
+/// The render itself, on the job's pool: `--strategy auto`'s profile and plan when asked for,
+/// the tile cache, then the image, with a progress bar.
+fn render(job: &RenderJob, scene: &Scene, defines: &[(String, String)]) -> Result<Rendered> {
+    let (args, pool) = (job.args, &job.pool);
+    let bar = progress_bar(args, scene);
     let auto = match args.strategy {
         Strategy::Auto => Some(pool.install(|| {
-            select_cmd::auto_plan(&scene, args.scene.as_deref(), &defines, settings, args.profile_share, budget)
+            select_cmd::auto_plan(scene, args.scene.as_deref(), defines, job.settings, args.profile_share, job.budget)
         })?),
         _ => None,
     };
     let t_cache = Instant::now();
     let node_cache = match &auto {
-        Some(a) => pool.install(|| NodeCache::from_plan(&scene, &a.file, budget))?,
-        None => pool.install(|| NodeCache::new(&scene, &args.strategy, budget))?,
+        Some(a) => pool.install(|| NodeCache::from_plan(scene, &a.file, job.budget))?,
+        None => pool.install(|| NodeCache::new(scene, &args.strategy, job.budget))?,
     };
     let cache_setup_s = t_cache.elapsed().as_secs_f64();
-    let out = pool.install(|| render_cached(&scene, settings, node_cache.as_ref(), &|n| bar.inc(n)));
+    let out = pool.install(|| render_cached(scene, job.settings, node_cache.as_ref(), &|n| bar.inc(n)));
     bar.finish_and_clear();
-    let nonfinite = NonFiniteReport::of(&scene, &out);
-    if args.strict && !nonfinite.is_clean() {
-        bail!("--strict: {}; nothing was written", nonfinite.message());
-    }
+    Ok(Rendered { out, node_cache, auto, cache_setup_s })
+}
 
-    let t_write = Instant::now();
-    for o in &outputs {
+/// Writes the image to every output, and the footprint AOV (EXR and heat map) beside the first
+/// when there is one; returns the AOV's files.
+fn write_images(outputs: &[PathBuf], out: &RenderOutput) -> Result<Vec<PathBuf>> {
+    for o in outputs {
         out.image.save(o)?;
     }
     let mut aov_files = Vec::new();
@@ -250,111 +335,112 @@ fn run_render(args: RenderArgs) -> Result<()> {
         aov_files.push(exr);
         aov_files.push(png);
     }
-    let write_s = t_write.elapsed().as_secs_f64();
-    let render_s = out.time.as_secs_f64();
-    let c = out.counts;
-    let total_rays = c.rays + c.shadow_rays;
-    if !args.quiet {
-        let names: Vec<String> = outputs.iter().chain(&aov_files).map(|p| p.display().to_string()).collect();
-        eprintln!(
-            "rendered {w}x{h} at {spp} spp in {render_s:.2} s on {threads} threads: {:.3} Msamples/s, {:.2} Mrays/s; wrote {}",
-            c.samples as f64 / render_s / 1e6,
-            total_rays as f64 / render_s / 1e6,
-            names.join(", ")
-        );
-        let node_evals: u64 = out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum();
-        if node_evals > 0 {
-            eprintln!(
-                "procedural textures: {node_evals} node evaluations ({:.1} per sample) in {} graph(s)",
-                node_evals as f64 / c.samples.max(1) as f64,
-                scene.graphs.len()
-            );
-        }
-        if let Some(nc) = &node_cache {
-            let st = nc.stats();
-            let t = st.total();
-            eprintln!(
-                "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
-                nc.cached_nodes(),
-                st.textures.iter().map(|x| x.lookups).sum::<u64>(),
-                t.hits,
-                t.misses,
-                t.fills,
-                t.texels_filled,
-                t.evictions,
-                st.peak_bytes as f64 / 1048576.0,
-                st.budget_bytes as f64 / 1048576.0
-            );
-            if t.texels_saturated > 0 {
-                // Usually texels of coarse tiles far outside the uv range the scene reads.
-                eprintln!(
-                    "tile cache: {} channel values beyond the half-float range were stored as ±65504",
-                    t.texels_saturated
-                );
-            }
-        }
-        if let Some(a) = &auto {
-            eprintln!(
-                "auto: profiled {} samples in {:.2} s, planned in {:.3} s ({}, {} candidates): caching {}",
-                a.profile.render.samples,
-                a.profile_s,
-                a.plan_s,
-                a.result.method,
-                a.result.candidates,
-                if a.file.nodes.is_empty() {
-                    "nothing".to_string()
-                } else {
-                    a.file.nodes.iter().map(|n| n.node.as_str()).collect::<Vec<_>>().join(", ")
-                }
-            );
-        }
-    }
-    // Never quiet: a wrong value is reported even with --quiet.
-    if !nonfinite.is_clean() {
-        eprintln!("warning: {}", nonfinite.message());
-    }
-    if let Some(path) = &args.stats_json {
-        let display = |p: &PathBuf| p.display().to_string();
-        let stats = RenderStats {
-            schema: STATS_SCHEMA.into(),
-            scene: args.scene.as_ref().map(display).unwrap_or_else(|| "<embedded default scene>".into()),
-            images: outputs.iter().map(display).collect(),
-            aovs: aov_files.iter().map(display).collect(),
-            footprint: format!("{:?}", args.footprint).to_lowercase(),
-            width: w,
-            height: h,
-            spp,
-            seed,
-            threads: threads as u32,
-            phases: Phases { load_s, cache_setup_s, render_s, write_s },
-            counts: (&c).into(),
-            nonfinite: nonfinite.stats(),
-            throughput: Throughput {
-                samples_per_s: c.samples as f64 / render_s,
-                rays_per_s: total_rays as f64 / render_s,
-            },
-            graphs: GraphStats::of_render(&scene.graphs, &out.graph_stats),
-            plan: auto.as_ref().map(|a| a.stats()),
-            cache: node_cache.as_ref().map(|nc| CacheReport::of(nc, &scene.graphs, args.strategy.to_string())),
-        };
-        write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
-    }
-    if let Some(a) = &auto {
-        let dir = args.report.clone().unwrap_or_else(|| {
-            let stem = outputs[0].with_extension("");
-            PathBuf::from(format!("{}.report", stem.display()))
-        });
-        let measured = select_cmd::measured_of_render(&out.graph_stats, node_cache.as_ref(), render_s);
-        let comparison = a.write_report(&dir, measured)?;
-        if !args.quiet {
-            eprintln!("{comparison}");
-            eprintln!("report: {}", dir.display());
-        }
-    }
-    Ok(())
+    Ok(aov_files)
 }
 
+/// The summary on stderr: size, time and rates, the files written, the graphs' node
+/// evaluations, the tile cache's counters and what `--strategy auto` chose.
+fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, aov_files: &[PathBuf]) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let (spp, threads) = (job.spp, job.threads);
+    let render_s = r.out.time.as_secs_f64();
+    let c = r.out.counts;
+    let total_rays = c.rays + c.shadow_rays;
+    let names: Vec<String> = job.outputs.iter().chain(aov_files).map(|p| p.display().to_string()).collect();
+    eprintln!(
+        "rendered {w}x{h} at {spp} spp in {render_s:.2} s on {threads} threads: {:.3} Msamples/s, {:.2} Mrays/s; wrote {}",
+        c.samples as f64 / render_s / 1e6,
+        total_rays as f64 / render_s / 1e6,
+        names.join(", ")
+    );
+    let node_evals: u64 = r.out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum();
+    if node_evals > 0 {
+        eprintln!(
+            "procedural textures: {node_evals} node evaluations ({:.1} per sample) in {} graph(s)",
+            node_evals as f64 / c.samples.max(1) as f64,
+            scene.graphs.len()
+        );
+    }
+    if let Some(nc) = &r.node_cache {
+        let st = nc.stats();
+        let t = st.total();
+        eprintln!(
+            "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
+            nc.cached_nodes(),
+            st.textures.iter().map(|x| x.lookups).sum::<u64>(),
+            t.hits,
+            t.misses,
+            t.fills,
+            t.texels_filled,
+            t.evictions,
+            st.peak_bytes as f64 / 1048576.0,
+            st.budget_bytes as f64 / 1048576.0
+        );
+        if t.texels_saturated > 0 {
+            // Usually texels of coarse tiles far outside the uv range the scene reads.
+            eprintln!(
+                "tile cache: {} channel values beyond the half-float range were stored as ±65504",
+                t.texels_saturated
+            );
+        }
+    }
+    if let Some(a) = &r.auto {
+        eprintln!(
+            "auto: profiled {} samples in {:.2} s, planned in {:.3} s ({}, {} candidates): caching {}",
+            a.profile.render.samples,
+            a.profile_s,
+            a.plan_s,
+            a.result.method,
+            a.result.candidates,
+            if a.file.nodes.is_empty() {
+                "nothing".to_string()
+            } else {
+                a.file.nodes.iter().map(|n| n.node.as_str()).collect::<Vec<_>>().join(", ")
+            }
+        );
+    }
+}
 
+/// Writes the stats file (`tessera.stats/1`, a [`RenderStats`]): the settings, the files, each
+/// phase's time, the counters and rates, the values that were not finite, the graphs, the plan
+/// and the tile cache.
+fn write_stats(
+    path: &Path,
+    job: &RenderJob,
+    scene: &Scene,
+    r: &Rendered,
+    nonfinite: &NonFiniteReport,
+    aov_files: &[PathBuf],
+    phases: Phases,
+) -> Result<()> {
+    let args = job.args;
+    let c = r.out.counts;
+    let total_rays = c.rays + c.shadow_rays;
+    let display = |p: &PathBuf| p.display().to_string();
+    let stats = RenderStats {
+        schema: STATS_SCHEMA.into(),
+        scene: args.scene.as_ref().map(display).unwrap_or_else(|| "<embedded default scene>".into()),
+        images: job.outputs.iter().map(display).collect(),
+        aovs: aov_files.iter().map(display).collect(),
+        footprint: format!("{:?}", args.footprint).to_lowercase(),
+        width: scene.camera.width,
+        height: scene.camera.height,
+        spp: job.spp,
+        seed: job.seed,
+        threads: job.threads as u32,
+        phases,
+        counts: (&c).into(),
+        nonfinite: nonfinite.stats(),
+        throughput: Throughput {
+            samples_per_s: c.samples as f64 / phases.render_s,
+            rays_per_s: total_rays as f64 / phases.render_s,
+        },
+        graphs: GraphStats::of_render(&scene.graphs, &r.out.graph_stats),
+        plan: r.auto.as_ref().map(|a| a.stats()),
+        cache: r.node_cache.as_ref().map(|nc| CacheReport::of(nc, &scene.graphs, args.strategy.to_string())),
+    };
+    write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())
+}
 
 /// What a render says about values that were not finite: samples left out of their pixels
 /// (with the first ones' origins), graph nodes that gave non-finite values, and the first
