@@ -298,6 +298,17 @@ pub struct CacheReport {
     pub strategy: String,
     /// The cached nodes (`nodegraph/node`).
     pub cached_nodes: Vec<String>,
+    /// The totals over all cached nodes (at the same level of the document).
+    #[serde(flatten)]
+    pub totals: CacheTotals,
+    /// Per cached node.
+    pub nodes: Vec<CacheNodeStats>,
+}
+
+/// The tile cache's totals over a render (`tessera bench` reports the same).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct CacheTotals {
     /// The byte budget.
     pub budget_bytes: u64,
     /// Most bytes of live tiles at any time.
@@ -313,16 +324,11 @@ pub struct CacheReport {
     /// Texels filled.
     pub texels_filled: u64,
     /// Half-float channel values stored clamped to ±65504.
-    #[serde(default)]
     pub texels_saturated: u64,
     /// Tiles evicted.
     pub evictions: u64,
     /// Fills of tiles evicted before.
-    #[serde(default)]
     pub refills: u64,
-    /// Per cached node.
-    #[serde(default)]
-    pub nodes: Vec<CacheNodeStats>,
 }
 
 /// One cached node's counters.
@@ -400,16 +406,18 @@ impl CacheReport {
         CacheReport {
             strategy,
             cached_nodes: names.iter().map(|n| n.to_string()).collect(),
-            budget_bytes: st.budget_bytes,
-            peak_bytes: st.peak_bytes,
-            lookups: st.textures.iter().map(|x| x.lookups).sum(),
-            tile_hits: t.hits,
-            tile_misses: t.misses,
-            tiles_filled: t.fills,
-            texels_filled: t.texels_filled,
-            texels_saturated: t.texels_saturated,
-            evictions: t.evictions,
-            refills: t.refills,
+            totals: CacheTotals {
+                budget_bytes: st.budget_bytes,
+                peak_bytes: st.peak_bytes,
+                lookups: st.textures.iter().map(|x| x.lookups).sum(),
+                tile_hits: t.hits,
+                tile_misses: t.misses,
+                tiles_filled: t.fills,
+                texels_filled: t.texels_filled,
+                texels_saturated: t.texels_saturated,
+                evictions: t.evictions,
+                refills: t.refills,
+            },
             nodes,
         }
     }

@@ -176,7 +176,7 @@ pub fn measured_of_render(
 /// What a render measured, from its `tessera.stats/1` document (as [`measured_of_render`]).
 pub fn measured_of_stats(v: &RenderStats) -> Summary {
     let mut m = Summary { evaluations: v.node_evaluations() as f64, render_s: v.phases.render_s, ..Summary::default() };
-    if let Some(c) = &v.cache {
+    if let Some(c) = v.cache.as_ref().map(|c| &c.totals) {
         m.lookups = c.lookups as f64;
         m.tiles_filled = c.tiles_filled as f64;
         m.texels_filled = c.texels_filled as f64;

@@ -17,7 +17,7 @@ mod results;
 mod runs;
 
 pub use results::{
-    BenchResults, CacheCounts, FlipSettings, ImageError, Phases, RepeatResult, RunAssets, SceneResult, Settings,
+    BenchResults, FlipSettings, ImageError, Phases, RepeatResult, RunAssets, SceneResult, Settings,
     Spread, StrategyResult, Summary,
 };
 

@@ -57,7 +57,7 @@ fn cells(r: &StrategyResult) -> Result<Vec<String>, String> {
     let ratio =
         s.ratio_to_lower_bound.map_or("–".to_string(), |q| with_spread(q.median, q.min, q.max, n)).replace('[', "[×");
     let cache = s.cache.as_ref();
-    let c = |f: fn(&crate::bench::CacheCounts) -> u64| cache.map_or("–".to_string(), |c| short(f(c) as f64));
+    let c = |f: fn(&render::stats::CacheTotals) -> u64| cache.map_or("–".to_string(), |c| short(f(&c.totals) as f64));
     let err = s.image_error;
     Ok(vec![
         strategy_name(r),
@@ -71,7 +71,7 @@ fn cells(r: &StrategyResult) -> Result<Vec<String>, String> {
         c(|c| c.lookups),
         c(|c| c.tile_hits),
         c(|c| c.tiles_filled),
-        cache.map_or("–".to_string(), |c| format!("{:.1}", c.peak_bytes as f64 / 1048576.0)),
+        cache.map_or("–".to_string(), |c| format!("{:.1}", c.totals.peak_bytes as f64 / 1048576.0)),
         err.map_or("–".to_string(), |e| format!("{:.3e}", e.rel_mse)),
         err.map_or("–".to_string(), |e| format!("{:.4}", e.flip)),
     ])

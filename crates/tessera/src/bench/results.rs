@@ -135,19 +135,12 @@ pub struct Phases {
     pub write_s: f64,
 }
 
-/// The tile cache's counters of a run.
+/// The tile cache's counters of a run: how many nodes it cached, and the render's totals.
 #[derive(Serialize, Clone, Default)]
 pub struct CacheCounts {
     pub cached_nodes: u64,
-    pub budget_bytes: u64,
-    pub peak_bytes: u64,
-    pub lookups: u64,
-    pub tile_hits: u64,
-    pub tile_misses: u64,
-    pub tiles_filled: u64,
-    pub texels_filled: u64,
-    pub evictions: u64,
-    pub refills: u64,
+    #[serde(flatten)]
+    pub totals: render::stats::CacheTotals,
 }
 
 /// Image error against the reference.

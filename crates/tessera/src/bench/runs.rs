@@ -117,18 +117,8 @@ fn parse_sample(stats: Value, image: Image, process_s: f64) -> std::result::Resu
         render_s: typed.phases.render_s,
         write_s: typed.phases.write_s,
     };
-    let cache = typed.cache.as_ref().map(|c| CacheCounts {
-        cached_nodes: c.cached_nodes.len() as u64,
-        budget_bytes: c.budget_bytes,
-        peak_bytes: c.peak_bytes,
-        lookups: c.lookups,
-        tile_hits: c.tile_hits,
-        tile_misses: c.tile_misses,
-        tiles_filled: c.tiles_filled,
-        texels_filled: c.texels_filled,
-        evictions: c.evictions,
-        refills: c.refills,
-    });
+    let cache =
+        typed.cache.as_ref().map(|c| CacheCounts { cached_nodes: c.cached_nodes.len() as u64, totals: c.totals });
     let samples = typed.counts.samples;
     let mut sample = Sample {
         process_s,
@@ -148,7 +138,7 @@ fn parse_sample(stats: Value, image: Image, process_s: f64) -> std::result::Resu
 }
 
 fn plan_comparison(plan: &PlanStats, s: &Sample) -> PlanComparison {
-    let c = s.cache.clone().unwrap_or_default();
+    let c = s.cache.clone().unwrap_or_default().totals;
     let measured_values = [
         s.node_evaluations as f64,
         c.lookups as f64,
