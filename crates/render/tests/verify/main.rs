@@ -1,0 +1,12 @@
+//! The renderer's integration tests, one binary with a module per subject (one link instead of
+//! eight): closed-form radiance, bad input, the tile cache, footprints against Monte Carlo,
+//! MaterialX materials, partial opacity, Mitsuba's reference images and selective caching.
+
+mod analytic;
+mod bad_input;
+mod caching;
+mod footprint_mc;
+mod mtlx;
+mod opacity;
+mod reference;
+mod selective;
