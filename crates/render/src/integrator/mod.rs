@@ -392,19 +392,21 @@ pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
     textures: &mut TextureEvaluator<S>,
     obs: &mut O,
 ) -> Spectrum {
-    let mut sum = Spectrum::ZERO;
+    // In f64: finite samples near f32's range (radiance 1e37 is accepted) must not sum to an
+    // infinite pixel; their mean is finite.
+    let mut sum = glam::DVec3::ZERO;
     for s in 0..samples {
         let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
         textures.begin_sample(s);
         let l = radiance(scene, settings, &cam, &mut rng, counts, textures, obs);
         counts.samples += 1;
         if l.is_finite() {
-            sum += l;
+            sum += l.as_dvec3();
         } else {
             counts.nonfinite_samples += 1;
             textures.record_nonfinite(x, y, s);
         }
         textures.end_sample(x, y, s);
     }
-    sum / samples.max(1) as f32
+    (sum / f64::from(samples.max(1))).as_vec3()
 }

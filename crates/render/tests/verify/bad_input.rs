@@ -147,3 +147,28 @@ fn missing_sensor() {
     let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
     assert_mentions(&e, &["nosensor.xml:1", "sensor"]);
 }
+
+/// Finite but huge radiance (1e37 per sample, accepted at load) must not overflow the pixel sum
+/// into an infinite pixel: 64 samples of 1e37 sum past f32's largest finite value (3.4e38), yet
+/// their mean is 1e37. Every sample is finite, so none is counted as non-finite either.
+#[test]
+fn huge_finite_radiance_gives_finite_pixels() {
+    let path = dir().join("huge_radiance.xml");
+    std::fs::write(
+        &path,
+        format!(
+            "<scene version=\"3.0.0\">\n{SENSOR}\n<emitter type=\"constant\"><rgb name=\"radiance\" value=\"1e37, 2e37, 3e37\"/></emitter>\n</scene>\n"
+        ),
+    )
+    .unwrap();
+    let scene = render::loader::load_file(&path, &[]).unwrap();
+    let out = render::integrator::render(&scene, render::integrator::RenderSettings::new(64, 1), &|_| {});
+    assert_eq!(out.counts.nonfinite_samples, 0);
+    for p in &out.image.pixels {
+        assert!(p.is_finite(), "pixel {p}");
+        // The mean of equal samples is the sample, up to the f32 rounding of the mean.
+        for (c, want) in p.to_array().iter().zip([1e37f32, 2e37, 3e37]) {
+            assert!((c / want - 1.0).abs() < 1e-5, "pixel {p}");
+        }
+    }
+}
