@@ -146,6 +146,9 @@ pub const MAX_PIXELS: u64 = 1 << 28;
 
 /// Loads a scene file; `defines` override its `<default>` values.
 pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
+    if path.is_dir() {
+        return Err(crate::error::Error::in_file(path, "is a folder, not a scene file"));
+    }
     if !path.is_file() {
         return Err(crate::error::Error::in_file(path, "scene file not found"));
     }

@@ -72,9 +72,7 @@ pub fn run(args: BakeArgs) -> Result<()> {
     if ext != "exr" && ext != "png" {
         bail!("{}: unsupported output format (expected .exr or .png)", args.out.display());
     }
-    if let Some(0) = args.threads {
-        bail!("--threads must be at least 1");
-    }
+    crate::check_threads(args.threads)?;
     let settings = BakeSettings {
         width: args.res,
         height: args.res_y.unwrap_or(args.res),

@@ -199,10 +199,24 @@ fn check_render_args(args: &RenderArgs) -> Result<Vec<(String, String)>> {
     if !(args.aov_density.is_finite() && args.aov_density > 0.0) {
         bail!("--aov-density must be a positive number, got {}", args.aov_density);
     }
-    if let Some(0) = args.threads {
-        bail!("--threads must be at least 1");
-    }
+    check_threads(args.threads)?;
     Ok(defines)
+}
+
+/// The most worker threads `--threads` accepts: beyond any machine's cores, and far below where
+/// starting them would exhaust the system's threads.
+pub const MAX_THREADS: usize = 1024;
+
+/// Checks a `--threads` value: at least 1 and at most [`MAX_THREADS`].
+pub fn check_threads(threads: Option<usize>) -> Result<()> {
+    match threads {
+        Some(0) => bail!("--threads must be at least 1"),
+        Some(n) if n > MAX_THREADS => bail!(
+            "--threads {n} is more than {MAX_THREADS} (this machine has {} cores)",
+            std::thread::available_parallelism().map_or(1, |c| c.get())
+        ),
+        _ => Ok(()),
+    }
 }
 
 /// A render to do: the arguments checked against the scene, what they resolve to, and the

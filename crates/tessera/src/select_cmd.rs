@@ -270,9 +270,7 @@ pub fn run_profile(args: ProfileArgs) -> Result<()> {
     if !(args.pixel_fraction > 0.0 && args.pixel_fraction <= 1.0) {
         bail!("--pixel-fraction must be in (0, 1], got {}", args.pixel_fraction);
     }
-    if let Some(0) = args.threads {
-        bail!("--threads must be at least 1");
-    }
+    crate::check_threads(args.threads)?;
     let scene = load_scene(args.scene.as_deref(), &defines)?;
     if scene.graphs.is_empty() {
         bail!("the scene has no procedural graphs: there is nothing to profile");

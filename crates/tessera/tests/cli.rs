@@ -85,6 +85,16 @@ fn bad_input_gives_clear_errors_and_no_output() {
     expect_failure(&["render", "--spp", "0", "--out", "x.exr"], &dir, &["spp"]);
     expect_failure(&["render", "--out", "x.tiff", "-D", "res=8"], &dir, &["x.tiff"]);
     expect_failure(&["render", "--threads", "0"], &dir, &["threads"]);
+    // Not one thread per request until the system refuses: a bound, named with the machine's cores.
+    expect_failure(&["render", "--threads", "100000", "-D", "res=8"], &dir, &["--threads 100000", "1024", "cores"]);
+    expect_failure(
+        &["bake", "x.mtlx", "--element", "o", "--res", "4", "--out", "b.png", "--threads", "5000"],
+        &dir,
+        &["--threads 5000"],
+    );
+    // A folder is not a missing file.
+    std::fs::create_dir_all(dir.join("scene_dir.xml")).unwrap();
+    expect_failure(&["render", "scene_dir.xml", "--out", "x.exr"], &dir, &["scene_dir.xml", "folder"]);
     expect_failure(&["render", "-D", "res=0"], &dir, &["film size"]);
     expect_failure(&["render", "-D", "res=100000"], &dir, &["exceeds"]);
     expect_failure(&["render", "-D", "noequals"], &dir, &["NAME=VALUE"]);
@@ -94,6 +104,26 @@ fn bad_input_gives_clear_errors_and_no_output() {
         .filter(|n| !n.ends_with(".xml"))
         .collect();
     assert!(left.is_empty(), "failed runs left files behind: {left:?}");
+}
+
+/// A `-D` that no `<default>` declares and no `$name` reads (a misspelling) changes nothing, so
+/// it is reported; declared and read ones are not.
+#[test]
+fn unused_defines_are_reported() {
+    let dir = temp_dir("defines");
+    let run = |defines: &[&str]| {
+        let mut args = vec!["render", "--quiet", "--out", "x.png"];
+        for d in defines {
+            args.extend(["-D", d]);
+        }
+        let out = tessera().current_dir(&dir).args(&args).output().unwrap();
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = run(&["res=8", "spp=1", "spp_typo=4"]);
+    assert!(err.contains("-D spp_typo=") && err.contains("no effect"), "{err}");
+    assert!(!err.contains("-D res=") && !err.contains("-D spp="), "{err}");
+    assert!(!run(&["res=8", "spp=1"]).contains("no effect"));
 }
 
 #[test]

@@ -29,7 +29,13 @@ pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) 
             return Err(Error::plain(format!("invalid define name '{name}': use letters, digits and '_' only")));
         }
     }
-    let mut parser = Parser { defines: defines.to_vec(), defaults: Vec::new(), ids: HashMap::new(), include_depth: 0 };
+    let mut parser = Parser {
+        defines: defines.to_vec(),
+        defaults: Vec::new(),
+        ids: HashMap::new(),
+        include_depth: 0,
+        read_vars: Default::default(),
+    };
     let file = Arc::new(virtual_path.to_path_buf());
     let doc = parse_xml(text, &file)?;
     let root = doc.root_element();
@@ -43,7 +49,26 @@ pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) 
     }
     let old_format = check_version(&src, root, true)?;
     let src = Src { old_format, ..src };
-    parser.build_object(&src, root, "scene")
+    let scene = parser.build_object(&src, root, "scene")?;
+    for name in unused_defines(&parser) {
+        eprintln!(
+            "warning: {}: -D {name}=… has no effect: the scene neither declares <default name=\"{name}\"> nor reads ${name}",
+            virtual_path.display()
+        );
+    }
+    Ok(scene)
+}
+
+/// The command-line defines that no `<default>` of the scene (or its includes) declares and
+/// no `$name` reads: a misspelt `-D` would otherwise change nothing, silently.
+fn unused_defines(parser: &Parser) -> Vec<&str> {
+    let read = parser.read_vars.borrow();
+    parser
+        .defines
+        .iter()
+        .map(|(n, _)| n.as_str())
+        .filter(|n| !parser.defaults.iter().any(|(d, _)| d == n) && !read.contains(*n))
+        .collect()
 }
 
 fn is_var_char(c: char) -> bool {
@@ -214,10 +239,15 @@ pub(super) struct Parser {
     /// Declared ids (and aliases): the object and where the id was declared.
     ids: HashMap<String, (Rc<Object>, Loc)>,
     include_depth: usize,
+    /// The variables `$name` substitutions read (a define none reads nor declares is reported).
+    read_vars: std::cell::RefCell<std::collections::HashSet<String>>,
 }
 
 impl Parser {
     fn variable(&self, name: &str) -> Option<&str> {
+        if !self.read_vars.borrow().contains(name) {
+            self.read_vars.borrow_mut().insert(name.to_string());
+        }
         self.defines.iter().chain(self.defaults.iter()).find(|(n, _)| n == name).map(|(_, v)| v.as_str())
     }
 
@@ -489,6 +519,23 @@ mod tests {
         assert_eq!(s.children("sampler")[0].int("sample_count", 0).unwrap(), 4);
         assert_eq!(s.children("film")[0].int("width", 0).unwrap(), 32);
         assert_eq!(s.children("film")[0].string("name", "").unwrap(), "img_R4");
+        // `spp` is declared and `res_x` read: neither is unused; a misspelt define is.
+        let scene_text = scene(
+            r#"<default name="spp" value="16"/>
+               <film type="hdrfilm"><string name="name" value="img_$res_x"/></film>"#,
+        );
+        let mut parser = Parser {
+            defines: vec![("spp".into(), "4".into()), ("res_x".into(), "R".into()), ("sp".into(), "8".into())],
+            defaults: Vec::new(),
+            ids: HashMap::new(),
+            include_depth: 0,
+            read_vars: Default::default(),
+        };
+        let file = Arc::new(p());
+        let xml = parse_xml(&scene_text, &file).unwrap();
+        let src = Src { file, doc: &xml, old_format: false };
+        parser.build_object(&src, xml.root_element(), "scene").unwrap();
+        assert_eq!(unused_defines(&parser), ["sp"]);
         // Without the override the first <default> wins (a later one does not replace it).
         let s = parse_str(&text, &p(), &[("res_x".to_string(), "R".to_string())]).unwrap();
         assert_eq!(s.children("sampler")[0].int("sample_count", 0).unwrap(), 16);

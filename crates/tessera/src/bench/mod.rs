@@ -17,8 +17,8 @@ mod results;
 mod runs;
 
 pub use results::{
-    BenchResults, FlipSettings, ImageError, Phases, RepeatResult, RunAssets, SceneResult, Settings,
-    Spread, StrategyResult, Summary,
+    BenchResults, FlipSettings, ImageError, Phases, RepeatResult, RunAssets, SceneResult, Settings, Spread,
+    StrategyResult, Summary,
 };
 
 use crate::flip::{self, Srgb8};
@@ -136,9 +136,7 @@ impl Config {
         if !(a.budget_mb.is_finite() && a.budget_mb > 0.0 && a.budget_mb <= 1.0e6) {
             bail!("--budget-mb must be a positive number of MiB (at most 1e6), got {}", a.budget_mb);
         }
-        if let Some(0) = a.threads {
-            bail!("--threads must be at least 1");
-        }
+        crate::check_threads(a.threads)?;
         for (name, _) in crate::parse_defines(&a.define)? {
             if name == "res" || name == "spp" {
                 bail!("-D {name}=... is set by the benchmark: use --{name} instead");
