@@ -6,6 +6,10 @@ use glam::{Affine2, Vec2, Vec3};
 use std::path::Path;
 use std::sync::Arc;
 
+/// The most pixels an image file may hold (2^28, as many as a film may have): checked against
+/// the header before any pixel is decoded.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
 /// How a bitmap treats uv outside [0, 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WrapMode {
@@ -85,6 +89,18 @@ impl Bitmap {
 
     fn load_exr(path: &Path) -> Result<Self> {
         use exr::prelude::*;
+        // The header first: a few bytes may claim any size, and decoding allocates it.
+        let meta = exr::meta::MetaData::read_from_file(path, false)
+            .map_err(|e| crate::error::Error::in_file(path, format!("cannot read EXR: {e}")))?;
+        for h in &meta.headers {
+            let (w, h) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+            if w.saturating_mul(h) > MAX_IMAGE_PIXELS {
+                return Err(crate::error::Error::in_file(
+                    path,
+                    format!("EXR image of {w}×{h} pixels exceeds the limit of {MAX_IMAGE_PIXELS} pixels"),
+                ));
+            }
+        }
         let image = read_first_rgba_layer_from_file(
             path,
             |res, _| {

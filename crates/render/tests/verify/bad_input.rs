@@ -172,3 +172,32 @@ fn huge_finite_radiance_gives_finite_pixels() {
         }
     }
 }
+
+/// An EXR whose header claims 65536 × 65536 pixels (a 51 GB decode) is refused from its header,
+/// naming the file and the size, before anything is allocated for its pixels.
+#[test]
+fn exr_headers_claiming_huge_images_are_refused() {
+    let d = dir();
+    let path = d.join("huge.exr");
+    render::film::Image::new(1, 1).save(&path).unwrap();
+    let mut bytes = std::fs::read(&path).unwrap();
+    // The data window: "dataWindow\0box2i\0", a 4-byte size (16), then xMin, yMin, xMax, yMax.
+    let key = b"dataWindow\0box2i\0";
+    let at = bytes.windows(key.len()).position(|w| w == key).expect("an EXR header has a data window") + key.len() + 4;
+    for (k, v) in [0i32, 0, 65535, 65535].iter().enumerate() {
+        bytes[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    std::fs::write(&path, &bytes).unwrap();
+    let scene = d.join("huge_env.xml");
+    std::fs::write(
+        &scene,
+        format!(
+            "<scene version=\"3.0.0\">\n{SENSOR}\n<emitter type=\"envmap\"><string name=\"filename\" value=\"huge.exr\"/></emitter>\n</scene>\n"
+        ),
+    )
+    .unwrap();
+    let t = std::time::Instant::now();
+    let e = render::loader::load_file(&scene, &[]).err().expect("a huge EXR must be refused").to_string();
+    assert_mentions(&e, &["huge.exr", "65536×65536", "exceeds"]);
+    assert!(t.elapsed().as_secs_f64() < 5.0, "refusing took {:?}", t.elapsed());
+}
