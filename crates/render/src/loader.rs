@@ -654,6 +654,14 @@ impl Builder {
             "mask" => {
                 // Mitsuba's default opacity is 0.5; a texture may drive it (`<texture name="opacity">`).
                 let opacity = self.texture_param(obj, "opacity", Vec3::splat(0.5))?;
+                if let Texture::Constant(o) = &opacity {
+                    if o.min_element() < 0.0 || o.max_element() > 1.0 {
+                        return Err(obj.error(format!(
+                            "mask opacity must lie in [0, 1] (0 = clear, 1 = opaque), got ({}, {}, {})",
+                            o.x, o.y, o.z
+                        )));
+                    }
+                }
                 let inner = match obj.children("bsdf").as_slice() {
                     [b] => self.bsdf(b)?,
                     [] => return Err(obj.error("mask needs one nested <bsdf>")),

@@ -348,16 +348,17 @@ impl PropertyAccess for PlySkip {
 }
 
 fn ply_error(path: &Path, e: ParseError) -> Error {
-    let msg = e.to_string();
-    // The crate writes "Line N: message\n\tString: ...": keep one line, our own location.
-    let msg = match e.line() {
-        Some(l) => msg.strip_prefix(&format!("Line {l}: ")).unwrap_or(&msg).to_string(),
-        None => msg,
+    let full = e.to_string();
+    // The crate writes "Line N: message\n\tString: <the offending line>\n\tError: ...": keep the
+    // message alone (the file's own text is never echoed: it may be anything, even a secret)
+    // with our own location, and at most 200 characters of it.
+    let first = full.lines().next().unwrap_or("");
+    let first = match e.line() {
+        Some(l) => first.strip_prefix(&format!("Line {l}: ")).unwrap_or(first),
+        None => first,
     };
-    let msg = format!(
-        "invalid PLY file: {}",
-        msg.replace("\r\n'", "'").replace("\n'", "'").replace("\n\t", "; ").replace('\n', "; ")
-    );
+    let cut = (0..=first.len().min(200)).rev().find(|&i| first.is_char_boundary(i)).unwrap_or(0);
+    let msg = format!("invalid PLY file: {}{}", &first[..cut], if cut < first.len() { "…" } else { "" });
     match e.line() {
         Some(line) => Error::at(&Loc::new(std::sync::Arc::new(path.to_path_buf()), line as u32, 0), msg),
         None => Error::in_file(path, msg),
@@ -654,9 +655,11 @@ mod tests {
         let p = temp_file("badnum.ply", bad.as_bytes());
         let e = load_ply(&p, false).unwrap_err().to_string();
         assert!(e.contains("badnum.ply:") && e.contains("invalid PLY"), "{e}");
-        // Not a PLY at all.
-        let p = temp_file("junk.ply", b"hello\n");
-        assert!(load_ply(&p, false).unwrap_err().to_string().contains("junk.ply"));
+        // Not a PLY at all: the message names the file and never echoes its content.
+        let p = temp_file("junk.ply", b"SECRET_TOKEN=hunter2\n");
+        let e = load_ply(&p, false).unwrap_err().to_string();
+        assert!(e.contains("junk.ply") && e.contains("magic number"), "{e}");
+        assert!(!e.contains("SECRET") && !e.contains("hunter2"), "{e}");
     }
 
     fn binary_ply(big_endian: bool) -> Vec<u8> {

@@ -96,6 +96,14 @@ fn nan_and_negative_parameters() {
         ),
         &["neg_alpha.xml:4", "alpha"],
     );
+    // An opacity is a probability of scattering: 2 would weigh paths by 2/p with p clamped.
+    assert_mentions(
+        &load_err(
+            "opacity_two",
+            r#"<shape type="sphere"><bsdf type="mask"><float name="opacity" value="2"/><bsdf type="diffuse"/></bsdf></shape>"#,
+        ),
+        &["opacity_two.xml:4", "opacity", "[0, 1]"],
+    );
 }
 
 #[test]
