@@ -196,5 +196,16 @@ fn bench_bad_input_is_a_clear_error_with_no_output() {
         assert!(err.contains(needle) && !err.contains("panicked"), "{args:?}: {err}");
         assert!(!dir.join("out").exists(), "{args:?} left an output folder");
     }
+    // Every requested strategy rejected by the renderer: the lower bound alone is not a success
+    // (the results are still written, with each failure).
+    let run = tessera()
+        .current_dir(&dir)
+        .args(["bench", "--quick", "--quiet", "--strategies", "not-a-strategy", "--out", "all_bad"])
+        .output()
+        .unwrap();
+    assert!(!run.status.success(), "a bench whose every strategy failed should fail");
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(err.contains("requested strategies") && !err.contains("panicked"), "{err}");
+    assert!(dir.join("all_bad/results.json").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -365,6 +365,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
     if ok == 0 {
         bail!("no run succeeded (see {})", cfg.out.join("results.md").display());
     }
+    // The free-texture lower bound alone measures nothing asked for.
+    let asked_ok =
+        results.scenes.iter().flat_map(|s| &s.runs).filter(|r| !r.lower_bound && r.summary.is_some()).count();
+    if asked_ok == 0 {
+        bail!(
+            "no run of the requested strategies succeeded, only the free-texture lower bound (see {})",
+            cfg.out.join("results.md").display()
+        );
+    }
     Ok(())
 }
 
