@@ -22,6 +22,19 @@ mod transform;
 pub use object::{Object, Param, Value};
 pub use parser::{parse_file, parse_str};
 
+/// At most this many characters of a value from the scene go into a message.
+pub(crate) const EXCERPT_CHARS: usize = 60;
+
+/// `s` as a message quotes it: whole when short, otherwise its first [`EXCERPT_CHARS`]
+/// characters and its length (a scene may hold a value of megabytes; a message never echoes it
+/// whole).
+pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    match s.char_indices().nth(EXCERPT_CHARS) {
+        None => std::borrow::Cow::Borrowed(s),
+        Some((cut, _)) => std::borrow::Cow::Owned(format!("{}… ({} bytes)", &s[..cut], s.len())),
+    }
+}
+
 /// The tags that create plugin objects (besides the root `<scene>`).
 pub const OBJECT_TAGS: &[&str] = &[
     "shape",
@@ -77,5 +90,19 @@ mod testing {
             assert!(err.contains(n), "error {err:?} should contain {n:?}");
         }
         err
+    }
+}
+
+#[cfg(test)]
+mod excerpt_tests {
+    #[test]
+    fn long_values_are_cut_and_short_ones_kept() {
+        assert_eq!(super::excerpt("0.5"), "0.5");
+        let long = "x".repeat(50_000_000);
+        let e = super::excerpt(&long);
+        assert!(e.len() < 100 && e.ends_with("(50000000 bytes)"), "{e}");
+        // Cuts fall on character boundaries.
+        let wide = "é".repeat(100);
+        assert!(super::excerpt(&wide).starts_with(&"é".repeat(super::EXCERPT_CHARS)));
     }
 }

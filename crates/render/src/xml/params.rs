@@ -16,7 +16,8 @@ fn parse_f32(tok: &str, attr: &Attr, tag: &str) -> Result<f32> {
         Error::at(
             &attr.loc,
             format!(
-                "invalid number '{tok}' in attribute '{}' of <{tag}> (expected a decimal number such as 0.5)",
+                "invalid number '{}' in attribute '{}' of <{tag}> (expected a decimal number such as 0.5)",
+                super::excerpt(tok),
                 attr.name
             ),
         )
@@ -152,7 +153,7 @@ impl Parser {
                         &a.loc,
                         format!(
                             "only uniform spectra (a single value) are supported, found \"{}\"; wavelength:value lists are not supported (use <rgb> instead)",
-                            a.value
+                            super::excerpt(&a.value)
                         ),
                     ));
                 }

@@ -107,7 +107,10 @@ fn check_version(src: &Src, node: roxmltree::Node, required: bool) -> Result<boo
         _ => {
             return Err(Error::at(
                 &vloc,
-                format!("invalid scene version '{value}' (expected major.minor.patch, e.g. \"3.0.0\")"),
+                format!(
+                    "invalid scene version '{}' (expected major.minor.patch, e.g. \"3.0.0\")",
+                    super::excerpt(value)
+                ),
             ));
         }
     };
@@ -264,7 +267,10 @@ impl Parser {
             let len = after.find(|c: char| !is_var_char(c)).unwrap_or(after.len());
             let name = &after[..len];
             if name.is_empty() {
-                return Err(Error::at(loc, format!("'$' not followed by a variable name in \"{s}\"")));
+                return Err(Error::at(
+                    loc,
+                    format!("'$' not followed by a variable name in \"{}\"", super::excerpt(s)),
+                ));
             }
             match self.variable(name) {
                 Some(v) => out.push_str(v),
@@ -272,7 +278,8 @@ impl Parser {
                     return Err(Error::at(
                         loc,
                         format!(
-                            "undefined variable '${name}' in \"{s}\" (declare it with <default name=\"{name}\" value=\"...\"/> or pass -D {name}=...)"
+                            "undefined variable '${name}' in \"{}\" (declare it with <default name=\"{name}\" value=\"...\"/> or pass -D {name}=...)",
+                            super::excerpt(s)
                         ),
                     ));
                 }
@@ -366,7 +373,7 @@ impl Parser {
                     let lead = raw.len() - raw.trim_start().len();
                     return Err(Error::at(
                         &src.loc(node.range().start + lead),
-                        format!("unexpected text \"{t}\" inside {parent}"),
+                        format!("unexpected text \"{}\" inside {parent}", super::excerpt(t)),
                     ));
                 }
                 return Ok(());

@@ -19,7 +19,7 @@ impl Parser {
                     if !t.is_empty() {
                         return Err(Error::at(
                             &src.loc(ch.range().start),
-                            format!("unexpected text \"{t}\" inside <transform name=\"{name}\">"),
+                            format!("unexpected text \"{}\" inside <transform name=\"{name}\">", super::excerpt(t)),
                         ));
                     }
                     continue;

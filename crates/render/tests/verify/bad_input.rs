@@ -209,3 +209,18 @@ fn exr_headers_claiming_huge_images_are_refused() {
     assert_mentions(&e, &["huge.exr", "65536×65536", "exceeds"]);
     assert!(t.elapsed().as_secs_f64() < 5.0, "refusing took {:?}", t.elapsed());
 }
+
+/// A value of megabytes in a bad parameter is quoted as a short excerpt, never echoed whole.
+#[test]
+fn messages_quote_short_excerpts_of_huge_values() {
+    let huge = "9x".repeat(2_500_000); // 5 MB, not a number
+    for (name, body) in [
+        ("huge_number", format!(r#"<shape type="sphere"><float name="radius" value="{huge}"/></shape>"#)),
+        ("huge_variable", format!(r#"<shape type="sphere"><string name="filename" value="{huge}$nope"/></shape>"#)),
+        ("huge_text", format!(r#"<shape type="sphere">{huge}</shape>"#)),
+    ] {
+        let e = load_err(name, &body);
+        assert!(e.len() < 600, "{name}: a {} byte message", e.len());
+        assert_mentions(&e, &[&format!("{name}.xml:4"), "bytes)"]);
+    }
+}
