@@ -92,6 +92,8 @@ fn bad_input_gives_clear_errors_and_no_output() {
         &dir,
         &["--threads 5000"],
     );
+    // A filter 1e18 footprints wide overflowed the moments' arithmetic (a panic); 1e20 hung.
+    expect_failure(&["render", "--filter-scale", "1e18", "-D", "res=8"], &dir, &["filter scale", "100"]);
     // A folder is not a missing file.
     std::fs::create_dir_all(dir.join("scene_dir.xml")).unwrap();
     expect_failure(&["render", "scene_dir.xml", "--out", "x.exr"], &dir, &["scene_dir.xml", "folder"]);

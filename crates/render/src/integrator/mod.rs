@@ -172,6 +172,10 @@ impl FilterScale {
     }
 }
 
+/// The widest fixed texture filter, in footprints: a hundred times the pixel filter blurs any
+/// texture to its mean already, and far wider ones only overflow the footprint arithmetic.
+pub const MAX_FILTER_SCALE: f32 = 100.0;
+
 impl std::str::FromStr for FilterScale {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
@@ -179,8 +183,11 @@ impl std::str::FromStr for FilterScale {
             return Ok(FilterScale::Auto);
         }
         match s.parse::<f32>() {
-            Ok(v) if v.is_finite() && v >= 0.0 => Ok(FilterScale::Fixed(v)),
-            _ => Err(format!("filter scale must be 'auto' or a non-negative number, got '{s}'")),
+            Ok(v) if (0.0..=MAX_FILTER_SCALE).contains(&v) => Ok(FilterScale::Fixed(v)),
+            _ => Err(format!(
+                "filter scale must be 'auto' or a number from 0 to {MAX_FILTER_SCALE}, got '{}'",
+                crate::xml::excerpt(s)
+            )),
         }
     }
 }
