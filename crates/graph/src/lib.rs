@@ -79,6 +79,7 @@ pub mod matrix;
 pub mod moments;
 pub mod mtlx;
 pub mod nodes;
+pub mod text;
 pub mod value;
 
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};

@@ -9,13 +9,17 @@ use std::path::{Path, PathBuf};
 pub(super) const XINCLUDE_NS: &str = "http://www.w3.org/2001/XInclude";
 
 pub(super) fn read_text(path: &Path, at: &Location) -> Result<String, LoadError> {
-    std::fs::read_to_string(path).map_err(|e| LoadError {
+    let bytes = std::fs::read(path).map_err(|e| LoadError {
         location: at.clone(),
         kind: if e.kind() == std::io::ErrorKind::NotFound {
             LoadErrorKind::MissingFile(path.to_path_buf())
         } else {
             LoadErrorKind::Io(format!("{}: {e}", path.display()))
         },
+    })?;
+    crate::text::utf8_text(bytes).map_err(|e| LoadError {
+        location: Location { file: path.to_path_buf(), line: e.line, column: e.column },
+        kind: LoadErrorKind::Io(e.message),
     })
 }
 

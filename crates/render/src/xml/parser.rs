@@ -16,8 +16,10 @@ const MAX_INCLUDE_DEPTH: usize = 16;
 /// Parses the scene file at `path`. `defines` are `-D name=value` pairs from the command line:
 /// they override the scene's `<default>`s.
 pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
-    let text =
-        std::fs::read_to_string(path).map_err(|e| Error::in_file(path, format!("cannot read scene file: {e}")))?;
+    let text = read_text(path).map_err(|e| match e {
+        Ok(io) => Error::in_file(path, format!("cannot read scene file: {io}")),
+        Err(at) => at,
+    })?;
     parse_str(&text, path, defines)
 }
 
@@ -69,6 +71,14 @@ fn unused_defines(parser: &Parser) -> Vec<&str> {
         .map(|(n, _)| n.as_str())
         .filter(|n| !parser.defaults.iter().any(|(d, _)| d == n) && !read.contains(*n))
         .collect()
+}
+
+/// The text of the XML file at `path`: `Err(Ok(io))` when it cannot be read, `Err(Err(e))`
+/// when it is not UTF-8 (`e` names the line and column of the first bad byte).
+fn read_text(path: &Path) -> std::result::Result<String, std::result::Result<std::io::Error, Error>> {
+    let bytes = std::fs::read(path).map_err(Ok)?;
+    graph::text::utf8_text(bytes)
+        .map_err(|e| Err(Error::at(&Loc::new(Arc::new(path.to_path_buf()), e.line, e.column), e.message)))
 }
 
 fn is_var_char(c: char) -> bool {
@@ -471,8 +481,10 @@ impl Parser {
                 path = dir.join(path);
             }
         }
-        let text = std::fs::read_to_string(&path)
-            .map_err(|err| Error::at(&f.loc, format!("cannot read included file '{}': {err}", path.display())))?;
+        let text = read_text(&path).map_err(|e| match e {
+            Ok(io) => Error::at(&f.loc, format!("cannot read included file '{}': {io}", path.display())),
+            Err(at) => at,
+        })?;
         let file = Arc::new(path);
         let doc = parse_xml(&text, &file)?;
         let root = doc.root_element();

@@ -224,3 +224,21 @@ fn messages_quote_short_excerpts_of_huge_values() {
         assert_mentions(&e, &[&format!("{name}.xml:4"), "bytes)"]);
     }
 }
+
+/// Legal XML in another encoding than UTF-8 is named as such, at the first byte that is not
+/// UTF-8, with what to do (Latin-1 'é' in a comment on line 3; a UTF-16 file by its mark).
+#[test]
+fn non_utf8_scenes_are_located() {
+    let path = dir().join("latin.xml");
+    let mut bytes = format!("<scene version=\"3.0.0\">\n{SENSOR}\n<!-- caf").into_bytes();
+    bytes.push(0xE9);
+    bytes.extend_from_slice(b" -->\n</scene>\n");
+    std::fs::write(&path, &bytes).unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    let line = 2 + SENSOR.lines().count();
+    assert_mentions(&e, &[&format!("latin.xml:{line}:9"), "0xE9", "UTF-8"]);
+    let path = dir().join("utf16.xml");
+    std::fs::write(&path, [0xFF, 0xFE, b'<', 0, b's', 0]).unwrap();
+    let e = render::loader::load_file(&path, &[]).err().unwrap().to_string();
+    assert_mentions(&e, &["utf16.xml", "UTF-16"]);
+}
