@@ -85,6 +85,28 @@ pub struct Shape {
     pub name: String,
 }
 
+/// The largest world coordinate a shape may reach (10^15): far beyond any scene, and far below
+/// where the BVH builder's surface areas (squares of extents) overflow f32.
+pub const MAX_EXTENT: f32 = 1e15;
+
+impl Shape {
+    /// The largest absolute world coordinate the shape reaches (NaN when one is not a number):
+    /// a mesh's vertices, a sphere's centre plus radius, a disk's square corners.
+    pub fn extent(&self) -> f32 {
+        let reach = |p: Vec3| p.abs().max_element();
+        match &self.geometry {
+            ShapeGeometry::Mesh { mesh, .. } => {
+                mesh.positions.iter().map(|&p| reach(p)).fold(0.0, |a: f32, b| if b.is_nan() { b } else { a.max(b) })
+            }
+            ShapeGeometry::Sphere { center, radius, .. } => reach(*center) + radius,
+            ShapeGeometry::Disk { to_world, .. } => [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                .into_iter()
+                .map(|(x, y)| reach(to_world.transform_point3(Vec3::new(x, y, 0.0))))
+                .fold(0.0, f32::max),
+        }
+    }
+}
+
 /// Local differential geometry at a ray hit.
 #[derive(Clone, Copy, Debug)]
 pub struct SurfaceInteraction {

@@ -785,7 +785,15 @@ impl Builder {
             [_, e, ..] => return Err(e.error("a shape takes one <emitter>")),
         };
         obj.check_unused()?;
-        self.shapes.push(Shape { geometry, material, emitter, flip_normals, face_normals, name });
+        let shape = Shape { geometry, material, emitter, flip_normals, face_normals, name };
+        let extent = shape.extent();
+        if !(extent <= crate::geometry::MAX_EXTENT) {
+            return Err(obj.error(format!(
+                "the shape reaches coordinates of {extent:e}; world coordinates beyond ±{:e} are not supported (check its to_world scale)",
+                crate::geometry::MAX_EXTENT
+            )));
+        }
+        self.shapes.push(shape);
         Ok(())
     }
 

@@ -276,3 +276,22 @@ fn loading_time_grows_linearly_with_the_scene() {
     let ratio = time(&large) / time(&small);
     assert!(ratio < 24.0, "8× the shapes took {ratio:.1}× the time (linear: 8, quadratic: 64)");
 }
+
+/// A shape scaled beyond ±1e15 (here a disk by 1e19, which overflowed the BVH builder's surface
+/// areas into a panic) is refused at its line; one at 1e12 still loads and renders.
+#[test]
+fn shapes_beyond_the_supported_extent_are_refused() {
+    let disk = |scale: &str| {
+        format!(r#"<shape type="disk"><transform name="to_world"><scale value="{scale}"/></transform></shape>"#)
+    };
+    assert_mentions(&load_err("huge_disk", &disk("1e19")), &["huge_disk.xml:4", "1e15", "to_world"]);
+    let path = dir().join("large_disk.xml");
+    std::fs::write(
+        &path,
+        format!("<scene version=\"3.0.0\">\n{SENSOR}\n<emitter type=\"constant\"/>\n{}\n</scene>\n", disk("1e12")),
+    )
+    .unwrap();
+    let scene = render::loader::load_file(&path, &[]).unwrap();
+    let out = render::integrator::render(&scene, render::integrator::RenderSettings::new(2, 1), &|_| {});
+    assert!(out.image.pixels.iter().all(|p| p.is_finite()));
+}
