@@ -233,3 +233,40 @@ fn bad_input_gives_clear_errors_and_no_output() {
     // The good output still bakes.
     bake(&dir, &["doc.mtlx", "--element", "g/good", "--res", "8", "--out", "x.exr", "--quiet"]);
 }
+
+/// Extreme but finite inputs bake finite values quickly, point-sampled and filtered: a
+/// checkerboard tiled 1e30 times, a fractal asking for 10^6 octaves (the sum stops at its
+/// octave limit), and noise at coordinates of 1e9 and beyond (f32's lattice there is whole
+/// numbers, where gradient noise is 0).
+#[test]
+fn extreme_finite_inputs_bake_finite_values_quickly() {
+    let dir = temp_dir("extreme");
+    std::fs::write(
+        dir.join("extreme.mtlx"),
+        r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="NG">
+    <checkerboard name="c" type="color3"><input name="uvtiling" type="vector2" value="1e30, 1e30"/></checkerboard>
+    <fractal2d name="f" type="float"><input name="octaves" type="integer" value="1000000"/></fractal2d>
+    <noise2d name="n" type="float"><input name="texcoord" type="vector2" value="3e9, 7e9"/></noise2d>
+    <output name="checker" type="color3" nodename="c"/>
+    <output name="fractal" type="float" nodename="f"/>
+    <output name="far_noise" type="float" nodename="n"/>
+  </nodegraph>
+</materialx>
+"#,
+    )
+    .unwrap();
+    for element in ["NG/checker", "NG/fractal", "NG/far_noise"] {
+        for filter in ["point", "texel"] {
+            let t = std::time::Instant::now();
+            let out = format!("{}-{filter}.exr", element.replace('/', "_"));
+            bake(&dir, &["extreme.mtlx", "--element", element, "--res", "16", "--filter", filter, "--out", &out]);
+            assert!(t.elapsed().as_secs_f64() < 30.0, "{element} {filter} took {:?}", t.elapsed());
+            let (_, _, chans) = read_exr(&dir.join(&out));
+            for (name, values) in &chans {
+                assert!(values.iter().all(|v| v.is_finite()), "{element} {filter} channel {name}");
+            }
+        }
+    }
+}
