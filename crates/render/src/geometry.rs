@@ -93,16 +93,16 @@ impl Shape {
     /// The largest absolute world coordinate the shape reaches (NaN when one is not a number):
     /// a mesh's vertices, a sphere's centre plus radius, a disk's square corners.
     pub fn extent(&self) -> f32 {
-        let reach = |p: Vec3| p.abs().max_element();
+        // A maximum that keeps a NaN once it meets one (`f32::max` would drop it).
+        let max = |a: f32, b: f32| if a.is_nan() || b.is_nan() { f32::NAN } else { a.max(b) };
+        let reach = |p: Vec3| p.abs().to_array().into_iter().fold(0.0, max);
         match &self.geometry {
-            ShapeGeometry::Mesh { mesh, .. } => {
-                mesh.positions.iter().map(|&p| reach(p)).fold(0.0, |a: f32, b| if b.is_nan() { b } else { a.max(b) })
-            }
+            ShapeGeometry::Mesh { mesh, .. } => mesh.positions.iter().map(|&p| reach(p)).fold(0.0, max),
             ShapeGeometry::Sphere { center, radius, .. } => reach(*center) + radius,
             ShapeGeometry::Disk { to_world, .. } => [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
                 .into_iter()
                 .map(|(x, y)| reach(to_world.transform_point3(Vec3::new(x, y, 0.0))))
-                .fold(0.0, f32::max),
+                .fold(0.0, max),
         }
     }
 }

@@ -219,13 +219,13 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     // Calibrate first: it also brings the cores out of idle, whose slow clocks would otherwise
     // inflate the first tens of milliseconds of the profile.
     let (lookup_ns, fill_ns_per_texel, timer_ns) = calibrate();
-    let t = trace(scene, opts);
+    let mut t = trace(scene, opts);
     if t.samples == 0 {
         return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
     }
-    let tap = &t.profiler;
     // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
-    let outside_thread_s = tap.warm.clone().robust_mean().map_or(0.0, |ns| ns * t.samples as f64 * 1e-9);
+    let outside_thread_s = t.profiler.warm.robust_mean().map_or(0.0, |ns| ns * t.samples as f64 * 1e-9);
+    let tap = &t.profiler;
     let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
     let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
     let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;

@@ -370,11 +370,30 @@ pub struct CacheLevelStats {
     pub peak_bytes: u64,
 }
 
+impl CacheTotals {
+    /// The totals of `nc`'s counters so far.
+    pub fn of(nc: &NodeCache) -> CacheTotals {
+        let st = nc.stats();
+        let t = st.total();
+        CacheTotals {
+            budget_bytes: st.budget_bytes,
+            peak_bytes: st.peak_bytes,
+            lookups: st.textures.iter().map(|x| x.lookups).sum(),
+            tile_hits: t.hits,
+            tile_misses: t.misses,
+            tiles_filled: t.fills,
+            texels_filled: t.texels_filled,
+            texels_saturated: t.texels_saturated,
+            evictions: t.evictions,
+            refills: t.refills,
+        }
+    }
+}
+
 impl CacheReport {
     /// The counters of `nc` after a render with `strategy`.
     pub fn of(nc: &NodeCache, graphs: &[SceneGraph], strategy: String) -> CacheReport {
         let st = nc.stats();
-        let t = st.total();
         let names = nc.cached_node_names(graphs);
         // Textures are added in the order of the names.
         let nodes = names
@@ -406,18 +425,7 @@ impl CacheReport {
         CacheReport {
             strategy,
             cached_nodes: names.iter().map(|n| n.to_string()).collect(),
-            totals: CacheTotals {
-                budget_bytes: st.budget_bytes,
-                peak_bytes: st.peak_bytes,
-                lookups: st.textures.iter().map(|x| x.lookups).sum(),
-                tile_hits: t.hits,
-                tile_misses: t.misses,
-                tiles_filled: t.fills,
-                texels_filled: t.texels_filled,
-                texels_saturated: t.texels_saturated,
-                evictions: t.evictions,
-                refills: t.refills,
-            },
+            totals: CacheTotals::of(nc),
             nodes,
         }
     }

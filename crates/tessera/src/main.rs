@@ -17,8 +17,8 @@ use render::integrator::{RenderOutput, RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
 use render::stats::{
-    CacheReport, GraphStats, NonFiniteNode, NonFiniteOrigin, NonFiniteSampleStats, NonFiniteStats, Phases, RenderStats,
-    Throughput, STATS_SCHEMA,
+    CacheReport, CacheTotals, GraphStats, NonFiniteNode, NonFiniteOrigin, NonFiniteSampleStats, NonFiniteStats, Phases,
+    RenderStats, Throughput, STATS_SCHEMA,
 };
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
@@ -376,19 +376,18 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, aov_files: &[Path
         );
     }
     if let Some(nc) = &r.node_cache {
-        let st = nc.stats();
-        let t = st.total();
+        let t = CacheTotals::of(nc);
         eprintln!(
             "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
             nc.cached_nodes(),
-            st.textures.iter().map(|x| x.lookups).sum::<u64>(),
-            t.hits,
-            t.misses,
-            t.fills,
+            t.lookups,
+            t.tile_hits,
+            t.tile_misses,
+            t.tiles_filled,
             t.texels_filled,
             t.evictions,
-            st.peak_bytes as f64 / 1048576.0,
-            st.budget_bytes as f64 / 1048576.0
+            t.peak_bytes as f64 / 1048576.0,
+            t.budget_bytes as f64 / 1048576.0
         );
         if t.texels_saturated > 0 {
             // Usually texels of coarse tiles far outside the uv range the scene reads.

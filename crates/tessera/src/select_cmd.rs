@@ -7,7 +7,7 @@ use plan::{Model, PlanFile, PlanSpec, Prediction, Profile, SearchOptions, Search
 use render::integrator::{FilterScale, RenderSettings};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
-use render::stats::{RenderStats, STATS_SCHEMA};
+use render::stats::{CacheTotals, RenderStats, STATS_SCHEMA};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -153,36 +153,32 @@ pub fn plan_profile(
 }
 
 /// What a render measured, in the model's terms (the quantities a prediction's [`Summary`]
-/// holds; texture thread-seconds are not measured and read 0): from a finished render, its
-/// graph statistics and cache.
-pub fn measured_of_render(
-    graph_stats: &[graph::EvalStats],
-    cache: Option<&render::caching::NodeCache>,
-    render_s: f64,
-) -> Summary {
-    let evaluations = graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64;
+/// holds; texture thread-seconds are not measured and read 0): its node evaluations, its tile
+/// cache's totals if it had one, and its render time.
+fn measured(evaluations: f64, cache: Option<&CacheTotals>, render_s: f64) -> Summary {
     let mut m = Summary { evaluations, render_s, ..Summary::default() };
-    if let Some(nc) = cache {
-        let st = nc.stats();
-        let t = st.total();
-        m.lookups = st.textures.iter().map(|x| x.lookups).sum::<u64>() as f64;
-        m.tiles_filled = t.fills as f64;
-        m.texels_filled = t.texels_filled as f64;
-        m.peak_bytes = st.peak_bytes as f64;
-    }
-    m
-}
-
-/// What a render measured, from its `tessera.stats/1` document (as [`measured_of_render`]).
-pub fn measured_of_stats(v: &RenderStats) -> Summary {
-    let mut m = Summary { evaluations: v.node_evaluations() as f64, render_s: v.phases.render_s, ..Summary::default() };
-    if let Some(c) = v.cache.as_ref().map(|c| &c.totals) {
+    if let Some(c) = cache {
         m.lookups = c.lookups as f64;
         m.tiles_filled = c.tiles_filled as f64;
         m.texels_filled = c.texels_filled as f64;
         m.peak_bytes = c.peak_bytes as f64;
     }
     m
+}
+
+/// What a finished render measured, from its graph statistics and cache.
+pub fn measured_of_render(
+    graph_stats: &[graph::EvalStats],
+    cache: Option<&render::caching::NodeCache>,
+    render_s: f64,
+) -> Summary {
+    let evaluations = graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum::<u64>() as f64;
+    measured(evaluations, cache.map(CacheTotals::of).as_ref(), render_s)
+}
+
+/// What a render measured, from its `tessera.stats/1` document.
+pub fn measured_of_stats(v: &RenderStats) -> Summary {
+    measured(v.node_evaluations() as f64, v.cache.as_ref().map(|c| &c.totals), v.phases.render_s)
 }
 
 fn rel(pred: f64, meas: f64) -> String {

@@ -118,22 +118,13 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) ->
 }
 
 /// What a material's textures are filtered over at a hit: the hit as a footprint vertex (none
-/// when footprints are not tracked: textures are then read at a point), the path's
-/// tangent-plane covariance there, and where the filter is centred relative to the hit.
+/// when footprints are not tracked: textures are then read at a point, the default), the
+/// path's tangent-plane covariance there, and where the filter is centred relative to the hit.
 #[derive(Clone, Copy, Debug, Default)]
 struct TextureFootprint {
     vertex: Option<Vertex>,
     var: DMat2,
     shift: CentreShift,
-}
-
-impl TextureFootprint {
-    /// A point at the hit (no footprint).
-    const POINT: TextureFootprint = TextureFootprint { vertex: None, var: DMat2::ZERO, shift: CentreShift::ZERO };
-}
-
-impl CentreShift {
-    const ZERO: CentreShift = CentreShift { uv: Vec2::ZERO, p: Vec3::ZERO };
 }
 
 /// A path's footprint at a hit it reached: what textures read there, and the estimator's state
@@ -280,7 +271,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                     let var = state.advance(cur, bs, shadow.d, &v);
                     TextureFootprint { vertex: Some(v), var, shift: CentreShift::default() }
                 }
-                _ => TextureFootprint::POINT,
+                _ => TextureFootprint::default(),
             };
             let outputs = self.material_outputs(material, &si, &tf);
             tr *= Spectrum::ONE - material.bsdf.opacity(&ShadeContext { uv: si.uv, outputs });
