@@ -176,6 +176,8 @@ pub struct NodeCache {
     min_level: Vec<Vec<u8>>,
     /// Per graph: whether none of its nodes is cached (its evaluations never ask the cache).
     uncached: Vec<bool>,
+    /// A hash of everything that decides the cached values ([`NodeCache::identity`]).
+    identity: String,
 }
 
 /// A uv rectangle `(min, max)`.
@@ -369,6 +371,7 @@ impl NodeCache {
         let config = CacheConfig { in_flight: cache::InFlight::Wait, ..CacheConfig::with_budget(budget_bytes) };
         let mut cache = TileCache::new(config).map_err(|e| Error::plain(format!("--budget-mb: {e}")))?;
         let mut textures = Vec::with_capacity(graphs.len());
+        let mut identity = format!("tile={};", config.tile_size);
         for (gi, sg) in graphs.iter().enumerate() {
             let g = sg.graph();
             let mut per_node = vec![None; g.node_count()];
@@ -389,6 +392,8 @@ impl NodeCache {
                     _ => node_texture(ch),
                 };
                 per_node[id.0 as usize] = Some(cache.add_texture(desc).map_err(|e| Error::plain(e.to_string()))?);
+                let level = min_level[gi][id.0 as usize];
+                identity.push_str(&format!("{gi}/{}@{level}:{desc:?};", g.node_name(id)));
             }
             textures.push(per_node);
         }
@@ -397,7 +402,10 @@ impl NodeCache {
         // (finer levels along grazing footprints) and made caching slower than evaluating;
         // trilinear blurs elongated footprints along their minor axis instead.
         let uncached = textures.iter().map(|t| t.iter().all(Option::is_none)).collect();
-        let nc = NodeCache { cache, textures, filter: Filter::TRILINEAR, baked, min_level, uncached };
+        let filter = Filter::TRILINEAR;
+        identity.push_str(&format!("baked={baked};filter={filter:?}"));
+        let identity = plan::text_hash(&[identity.as_bytes()]);
+        let nc = NodeCache { cache, textures, filter, baked, min_level, uncached, identity };
         if baked {
             nc.bake(graphs, &rects)?;
         }
@@ -458,6 +466,14 @@ impl NodeCache {
             },
         );
         Ok(())
+    }
+
+    /// A hash of what decides the values the cache serves: each cached node with its finest
+    /// cached level and texture layout, the tile size, the filter, and whether it is baked; not
+    /// the budget, which changes only how often tiles are filled again. Two renders whose
+    /// caches have the same identity (and that agree otherwise) make the same image.
+    pub fn identity(&self) -> &str {
+        &self.identity
     }
 
     /// Number of cached nodes.

@@ -35,18 +35,9 @@ impl Image {
         if ext != "exr" && ext != "png" {
             return Err(Error::in_file(path, format!("unsupported output format '.{ext}' (expected .exr or .png)")));
         }
-        let tmp = temp_path(path);
-        let result = match ext.as_str() {
-            "exr" => self.write_exr(&tmp),
-            _ => self.write_png(&tmp),
-        };
-        if let Err(e) = result {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(e);
-        }
-        std::fs::rename(&tmp, path).map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            Error::in_file(path, format!("cannot move the finished image into place: {e}"))
+        write_through_temp(path, |tmp| match ext.as_str() {
+            "exr" => self.write_exr(tmp),
+            _ => self.write_png(tmp),
         })
     }
 
@@ -91,6 +82,74 @@ impl Image {
     }
 }
 
+/// Bits of a [`PixelSum`] below the unit: samples are summed in multiples of 2⁻⁵⁶ (1.4e-17).
+pub const SUM_FRACTION_BITS: i32 = 56;
+
+/// The largest magnitude a sample's channel adds to a [`PixelSum`]: 2⁴⁶ (7.0e13). Larger finite
+/// values are clamped to it and counted (`RenderCounts::clamped_samples`), so that 2²⁴ samples
+/// (the most `--spp` takes) still sum without overflow.
+pub const SAMPLE_LIMIT: f32 = (1u64 << 46) as f32;
+
+/// A pixel's samples summed exactly, in fixed point ([`SUM_FRACTION_BITS`] below the unit, one
+/// `i128` per channel).
+///
+/// Integer addition is associative where floating-point addition is not: sums of any split of a
+/// pixel's samples (sample passes rendered apart, `tessera merge`) add up to the very sum a
+/// single render makes, so the merged pixel is the single render's bit for bit. Each sample is
+/// rounded once, towards zero, to a multiple of 2⁻⁵⁶: far below what an f32 pixel resolves for
+/// radiance above 1e-9.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PixelSum(pub [i128; 3]);
+
+impl PixelSum {
+    const SCALE: f64 = (1u64 << SUM_FRACTION_BITS) as f64;
+
+    /// Adds a finite sample; returns whether a channel was beyond [`SAMPLE_LIMIT`] and clamped.
+    #[inline]
+    pub fn add(&mut self, l: Spectrum) -> bool {
+        let mut clamped = false;
+        for (acc, v) in self.0.iter_mut().zip(l.to_array()) {
+            let c = v.clamp(-SAMPLE_LIMIT, SAMPLE_LIMIT);
+            clamped |= c != v;
+            // Exact: a power-of-two scale of an f32 fits an f64, and the product (below 2¹⁰²)
+            // converts to an integer by dropping its fraction.
+            *acc += (f64::from(c) * Self::SCALE) as i128;
+        }
+        clamped
+    }
+
+    /// Adds another sum (of other samples of the same pixel).
+    #[inline]
+    pub fn merge(&mut self, o: &PixelSum) {
+        for (a, b) in self.0.iter_mut().zip(o.0) {
+            *a += b;
+        }
+    }
+
+    /// The mean over `n` samples, rounded to f32 (through f64, the same way wherever the sum
+    /// was made).
+    #[inline]
+    pub fn mean(&self, n: u32) -> Spectrum {
+        let n = f64::from(n.max(1));
+        let c = |a: i128| ((a as f64 / Self::SCALE) / n) as f32;
+        Spectrum::new(c(self.0[0]), c(self.0[1]), c(self.0[2]))
+    }
+}
+
+/// Writes a file by `write`ing a temporary one beside `path` and renaming it into place, so
+/// that an interrupted or failed write never leaves a partial file under the final name.
+pub fn write_through_temp(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    let tmp = temp_path(path);
+    if let Err(e) = write(&tmp) {
+        let _ = std::fs::remove_file(&tmp);
+        return Err(e);
+    }
+    std::fs::rename(&tmp, path).map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        Error::in_file(path, format!("cannot move the finished file into place: {e}"))
+    })
+}
+
 fn temp_path(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
@@ -113,6 +172,85 @@ pub fn relative_mse(a: &Image, reference: &Image) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Samples of every magnitude a render meets, from a fixed linear congruential stream.
+    fn samples(n: usize, seed: u64) -> Vec<Spectrum> {
+        let mut state = seed;
+        let mut next = move || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..n)
+            .map(|_| {
+                let mut c = || {
+                    let v = (next() * 40.0 - 20.0).exp2() as f32; // 1e-6 to 1e6
+                    if next() < 0.1 {
+                        -v
+                    } else {
+                        v
+                    }
+                };
+                Spectrum::new(c(), c(), c())
+            })
+            .collect()
+    }
+
+    /// Any split of a pixel's samples sums to the same bits, and the mean is the f64 mean of the
+    /// samples (summed independently, in order) to f32 precision.
+    #[test]
+    fn pixel_sums_are_exact_whatever_the_split() {
+        for seed in 0..20u64 {
+            let s = samples(1 + (seed as usize * 37) % 300, seed);
+            let mut whole = PixelSum::default();
+            for l in &s {
+                assert!(!whole.add(*l));
+            }
+            for cuts in [vec![1], vec![s.len() / 3, s.len() / 2], (1..s.len()).step_by(7).collect()] {
+                let mut bounds = vec![0];
+                bounds.extend(cuts.into_iter().filter(|&c| c < s.len()));
+                bounds.push(s.len());
+                let mut parts: Vec<PixelSum> = bounds
+                    .windows(2)
+                    .map(|w| {
+                        let mut p = PixelSum::default();
+                        s[w[0]..w[1]].iter().for_each(|l| {
+                            p.add(*l);
+                        });
+                        p
+                    })
+                    .collect();
+                parts.reverse();
+                let mut merged = PixelSum::default();
+                parts.iter().for_each(|p| merged.merge(p));
+                assert_eq!(merged, whole, "seed {seed}, split at {bounds:?}");
+            }
+            let n = s.len() as u32;
+            let mean = whole.mean(n);
+            for c in 0..3 {
+                let exact: f64 = s.iter().map(|l| f64::from(l[c])).sum::<f64>() / f64::from(n);
+                let scale: f64 = s.iter().map(|l| f64::from(l[c]).abs()).sum::<f64>() / f64::from(n);
+                assert!(((f64::from(mean[c]) - exact) / scale).abs() < 1e-6, "seed {seed}: {} vs {exact}", mean[c]);
+            }
+        }
+    }
+
+    #[test]
+    fn samples_beyond_the_limit_are_clamped_and_said() {
+        let mut p = PixelSum::default();
+        assert!(p.add(Spectrum::new(1e30, -1e20, 1.0)));
+        assert!(!p.add(Spectrum::splat(SAMPLE_LIMIT)));
+        let m = p.mean(2);
+        assert_eq!((m.x, m.y), (SAMPLE_LIMIT, 0.0));
+        // 2^24 samples at the limit (the most --spp takes) do not overflow.
+        let mut big = PixelSum::default();
+        big.add(Spectrum::splat(SAMPLE_LIMIT));
+        let one = big;
+        for _ in 0..24 {
+            let copy = big;
+            big.merge(&copy);
+        }
+        assert_eq!(big.mean(1 << 24), one.mean(1));
+    }
 
     #[test]
     fn exr_round_trips_and_png_writes() {

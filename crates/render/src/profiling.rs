@@ -283,7 +283,7 @@ fn trace(scene: &Scene, opts: &ProfileOptions) -> Traced {
     let (w, h) = (scene.camera.width, scene.camera.height);
     let settings = opts.settings;
     let start = Instant::now();
-    let results: Vec<BucketProfile> = for_each_bucket(w, h, &|b| {
+    let results: Vec<BucketProfile> = for_each_bucket(crate::integrator::Bucket::full(w, h), &|b| {
         let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, Profiler::new(streams));
         for s in textures.eval_scratches_mut() {
             s.enable_binned_timing(BINS, PROFILE_TIMING_PERIOD);
@@ -294,7 +294,7 @@ fn trace(scene: &Scene, opts: &ProfileOptions) -> Traced {
                 // A second hash (of the transposed pixel) picks the warm-timed pixels.
                 let extra = u32::from(settings.spp == 1 && traced(y, x, opts.warm_fraction));
                 let n = settings.spp + extra;
-                render_pixel_with(scene, settings, x, y, n, &mut counts, &mut textures, &mut NoObserver);
+                render_pixel_with(scene, settings, x, y, 0..n, &mut counts, &mut textures, &mut NoObserver);
             }
         }
         let binned = textures.eval_scratches_mut().iter().map(|s| s.binned_timings().clone()).collect();

@@ -106,11 +106,32 @@ pub struct Counts {
     /// Samples left out of their pixels because their radiance was not finite.
     #[serde(default)]
     pub nonfinite_samples: u64,
+    /// Samples with a channel beyond the pixel sum's limit (`render::film::SAMPLE_LIMIT`),
+    /// clamped to it.
+    #[serde(default)]
+    pub clamped_samples: u64,
+}
+
+impl Counts {
+    /// Adds another render's counts (of other samples or pixels).
+    pub fn add(&mut self, o: &Counts) {
+        self.samples += o.samples;
+        self.rays += o.rays;
+        self.shadow_rays += o.shadow_rays;
+        self.nonfinite_samples += o.nonfinite_samples;
+        self.clamped_samples += o.clamped_samples;
+    }
 }
 
 impl From<&RenderCounts> for Counts {
     fn from(c: &RenderCounts) -> Counts {
-        Counts { samples: c.samples, rays: c.rays, shadow_rays: c.shadow_rays, nonfinite_samples: c.nonfinite_samples }
+        Counts {
+            samples: c.samples,
+            rays: c.rays,
+            shadow_rays: c.shadow_rays,
+            nonfinite_samples: c.nonfinite_samples,
+            clamped_samples: c.clamped_samples,
+        }
     }
 }
 

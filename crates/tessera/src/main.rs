@@ -6,6 +6,7 @@ mod bench;
 mod flip;
 mod footprint_cmd;
 mod heatmap;
+mod merge_cmd;
 mod select_cmd;
 mod svg;
 
@@ -13,7 +14,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use render::caching::{render_cached, NodeCache, Strategy};
-use render::integrator::{RenderOutput, RenderSettings, AOV_NO_VERTEX};
+use render::integrator::{Bucket, RenderOutput, RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;
 use render::stats::{
@@ -54,6 +55,12 @@ enum Command {
     /// Render every scene of a suite with each caching strategy and the free-texture lower bound;
     /// write results.json, results.md and report.html.
     Bench(bench::BenchArgs),
+    /// Merge the pass files of one render (`render --samples A..B`, `--crop`) into its image,
+    /// bit for bit the image of the render unsplit.
+    Merge(merge_cmd::MergeArgs),
+    /// Stitch the image windows of one render (`render --crop`) into its image: `merge` by
+    /// another name (either takes any mix of sample passes and windows).
+    Assemble(merge_cmd::MergeArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -118,6 +125,34 @@ struct RenderArgs {
     /// finite, an error naming where it came from; nothing is written.
     #[arg(long)]
     strict: bool,
+    /// Take only the sample indices A to B−1 (of the --spp of the whole render) in every pixel,
+    /// and write a pass file (--out NAME.exr) for `tessera merge`.
+    #[arg(long, value_name = "A..B", value_parser = parse_samples)]
+    samples: Option<(u32, u32)>,
+    /// Render only the window x0,y0,x1,y1 of the image (columns x0 to x1−1, rows y0 to y1−1)
+    /// and write a pass file (--out NAME.exr) for `tessera assemble`.
+    #[arg(long, value_name = "X0,Y0,X1,Y1", value_parser = parse_crop)]
+    crop: Option<[u32; 4]>,
+}
+
+fn parse_samples(s: &str) -> Result<(u32, u32), String> {
+    let bad = || format!("--samples expects A..B (sample indices A to B-1, A < B), got '{}'", render::xml::excerpt(s));
+    let (a, b) = s.split_once("..").ok_or_else(bad)?;
+    let (a, b): (u32, u32) = (a.trim().parse().map_err(|_| bad())?, b.trim().parse().map_err(|_| bad())?);
+    if a >= b {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+fn parse_crop(s: &str) -> Result<[u32; 4], String> {
+    let bad =
+        || format!("--crop expects x0,y0,x1,y1 (whole pixels, x0 < x1, y0 < y1), got '{}'", render::xml::excerpt(s));
+    let v: Vec<u32> = s.split(',').map(|p| p.trim().parse().map_err(|_| bad())).collect::<Result<_, _>>()?;
+    match v[..] {
+        [x0, y0, x1, y1] if x0 < x1 && y0 < y1 => Ok([x0, y0, x1, y1]),
+        _ => Err(bad()),
+    }
 }
 
 fn parse_footprint(s: &str) -> Result<FootprintMode, String> {
@@ -134,6 +169,7 @@ fn main() {
         Command::Plan(args) => select_cmd::run_plan(args),
         Command::Analyze(args) => select_cmd::run_analyze(args),
         Command::Bench(args) => bench::run(args),
+        Command::Merge(args) | Command::Assemble(args) => merge_cmd::run(args),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");
@@ -164,7 +200,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
     }
 
     let t_write = Instant::now();
-    let aov_files = write_images(&job.outputs, &r.out)?;
+    let aov_files = if job.pass() {
+        let id = select_cmd::scene_id(args.scene.as_deref(), &defines)?;
+        let cache = r.node_cache.as_ref().map_or("none", |c| c.identity()).to_string();
+        let identity = render::pass::identity(&scene, &job.settings, &id.hash, cache);
+        render::pass::Pass::of_render(&r.out, identity, &id.name)?.save(&job.outputs[0])?;
+        Vec::new()
+    } else {
+        write_images(&job.outputs, &r.out)?
+    };
     let write_s = t_write.elapsed().as_secs_f64();
     let render_s = r.out.time.as_secs_f64();
     if !args.quiet {
@@ -173,6 +217,13 @@ fn run_render(args: RenderArgs) -> Result<()> {
     // Never quiet: a wrong value is reported even with --quiet.
     if !nonfinite.is_clean() {
         eprintln!("warning: {}", nonfinite.message());
+    }
+    if r.out.counts.clamped_samples > 0 {
+        eprintln!(
+            "warning: {} samples had radiance beyond {:e} and were clamped to it",
+            r.out.counts.clamped_samples,
+            render::film::SAMPLE_LIMIT
+        );
     }
     if let Some(path) = &args.stats_json {
         let phases = Phases { load_s, cache_setup_s: r.cache_setup_s, render_s, write_s };
@@ -243,6 +294,35 @@ impl<'a> RenderJob<'a> {
             bail!("--spp must be between 1 and {}, got {spp}", 1 << 24);
         }
         let seed = args.seed.unwrap_or(scene.seed);
+        let (w, h) = (scene.camera.width, scene.camera.height);
+        if let Some((a, b)) = args.samples {
+            if b > spp {
+                bail!("--samples {a}..{b} goes beyond the render's {spp} samples per pixel (give the whole render's --spp)");
+            }
+        }
+        let window = match args.crop {
+            Some([x0, y0, x1, y1]) if x1 > w || y1 > h => {
+                bail!("--crop {x0},{y0},{x1},{y1} reaches beyond the {w} × {h} image")
+            }
+            Some([x0, y0, x1, y1]) => Some(render::integrator::Bucket { x0, y0, x1, y1 }),
+            None => None,
+        };
+        let pass = args.samples.is_some() || window.is_some();
+        if pass {
+            match &args.out {
+                Some(o) if o.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) => {}
+                _ => bail!("--samples and --crop write a pass file, an EXR: give --out NAME.exr"),
+            }
+            if args.strategy == Strategy::Auto {
+                bail!(
+                    "--strategy auto profiles each render on its own, and passes must all cache the same nodes: \
+                     profile and plan once (tessera profile, tessera plan), then render every pass with --strategy plan:FILE"
+                );
+            }
+            if !args.aov.is_empty() {
+                bail!("--aov is written by whole renders only, not with --samples or --crop");
+            }
+        }
         let outputs: Vec<PathBuf> = match &args.out {
             Some(p) => vec![p.clone()],
             None => {
@@ -274,6 +354,9 @@ impl<'a> RenderJob<'a> {
             footprint_aov_density: want_aov.then_some(args.aov_density),
             free_textures: args.free_textures,
             filter_scale: args.filter_scale,
+            sample_range: args.samples,
+            window,
+            keep_sums: pass,
             ..RenderSettings::new(spp, seed)
         };
         if !(args.budget_mb.is_finite() && args.budget_mb > 0.0 && args.budget_mb <= 1.0e6) {
@@ -285,14 +368,19 @@ impl<'a> RenderJob<'a> {
         }
         Ok(RenderJob { args, spp, seed, outputs, threads, pool, settings, budget })
     }
+
+    /// Whether the render is one part of a split render, written as a pass file.
+    fn pass(&self) -> bool {
+        self.settings.keep_sums
+    }
 }
 
 /// The progress bar over the image's pixels: drawn on a terminal unless --quiet, hidden otherwise.
-fn progress_bar(args: &RenderArgs, scene: &Scene) -> ProgressBar {
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let show = !args.quiet && std::io::stderr().is_terminal();
+fn progress_bar(job: &RenderJob, scene: &Scene) -> ProgressBar {
+    let window = job.settings.window.unwrap_or(Bucket::full(scene.camera.width, scene.camera.height));
+    let show = !job.args.quiet && std::io::stderr().is_terminal();
     let bar = ProgressBar::with_draw_target(
-        Some(w as u64 * h as u64),
+        Some(window.len() as u64),
         if show { ProgressDrawTarget::stderr() } else { ProgressDrawTarget::hidden() },
     );
     bar.set_style(
@@ -315,7 +403,7 @@ struct Rendered {
 /// the tile cache, then the image, with a progress bar.
 fn render(job: &RenderJob, scene: &Scene, defines: &[(String, String)]) -> Result<Rendered> {
     let (args, pool) = (job.args, &job.pool);
-    let bar = progress_bar(args, scene);
+    let bar = progress_bar(job, scene);
     let auto = match args.strategy {
         Strategy::Auto => Some(pool.install(|| {
             select_cmd::auto_plan(scene, args.scene.as_deref(), defines, job.settings, args.profile_share, job.budget)
@@ -355,8 +443,8 @@ fn write_images(outputs: &[PathBuf], out: &RenderOutput) -> Result<Vec<PathBuf>>
 /// The summary on stderr: size, time and rates, the files written, the graphs' node
 /// evaluations, the tile cache's counters and what `--strategy auto` chose.
 fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, aov_files: &[PathBuf]) {
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let (spp, threads) = (job.spp, job.threads);
+    let (w, h) = (r.out.image.width, r.out.image.height);
+    let (spp, threads) = (r.out.samples.len(), job.threads);
     let render_s = r.out.time.as_secs_f64();
     let c = r.out.counts;
     let total_rays = c.rays + c.shadow_rays;

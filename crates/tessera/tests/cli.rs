@@ -386,3 +386,50 @@ fn demo_scenes_have_no_non_finite_values() {
         assert_eq!(stats["nonfinite"]["nodes"].as_array().map(|a| a.len()), Some(0), "{name}");
     }
 }
+
+/// A render split on the command line, into sample passes on one side and windows on the
+/// other, merges into the very file the unsplit render writes; every step's bad input is an
+/// error and leaves no file behind.
+#[test]
+fn split_renders_merge_into_the_unsplit_image() {
+    let dir = temp_dir("passes");
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", "--quiet", "-D", "res=40", "--spp", "5", "--seed", "4", "--strategy", "outputs"];
+        args.extend_from_slice(extra);
+        let out = tessera().current_dir(&dir).args(&args).output().unwrap();
+        assert!(out.status.success(), "{extra:?}: {}", String::from_utf8_lossy(&out.stderr));
+    };
+    render(&["--out", "whole.exr"]);
+    render(&["--samples", "0..2", "--out", "p0.exr", "--threads", "1"]);
+    render(&["--samples", "2..5", "--out", "p1.exr"]);
+    render(&["--crop", "0,0,40,13", "--out", "top.exr"]);
+    render(&["--crop", "0,13,40,40", "--samples", "0..4", "--out", "bottom0.exr"]);
+    render(&["--crop", "0,13,40,40", "--samples", "4..5", "--out", "bottom1.exr"]);
+    let merge = |cmd: &str, passes: &[&str], out: &str| {
+        let mut args = vec![cmd, "--out", out];
+        args.extend_from_slice(passes);
+        let o = tessera().current_dir(&dir).args(&args).output().unwrap();
+        assert!(o.status.success(), "{cmd} {passes:?}: {}", String::from_utf8_lossy(&o.stderr));
+        std::fs::read(dir.join(out)).unwrap()
+    };
+    let whole = std::fs::read(dir.join("whole.exr")).unwrap();
+    assert!(merge("merge", &["p1.exr", "p0.exr"], "merged.exr") == whole, "merged sample passes differ");
+    assert!(merge("assemble", &["top.exr", "bottom1.exr", "bottom0.exr"], "assembled.exr") == whole);
+    merge("merge", &["p0.exr", "p1.exr"], "merged.png");
+
+    let base = ["render", "-D", "res=40", "--spp", "5"];
+    fn with<'a>(base: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+        base.iter().chain(extra).copied().collect()
+    }
+    expect_failure(&with(&base, &["--samples", "3..2", "--out", "x.exr"]), &dir, &["--samples", "A..B"]);
+    expect_failure(&with(&base, &["--samples", "3..9", "--out", "x.exr"]), &dir, &["3..9", "5 samples per pixel"]);
+    expect_failure(&with(&base, &["--crop", "0,0,41,10", "--out", "x.exr"]), &dir, &["--crop", "40 × 40"]);
+    expect_failure(&with(&base, &["--crop", "0,0,10", "--out", "x.exr"]), &dir, &["x0,y0,x1,y1"]);
+    expect_failure(&with(&base, &["--samples", "0..2", "--out", "x.png"]), &dir, &["pass file", ".exr"]);
+    expect_failure(&with(&base, &["--samples", "0..2", "--strategy", "auto", "--out", "x.exr"]), &dir, &["plan:FILE"]);
+    expect_failure(&["merge", "p0.exr", "--out", "x.exr"], &dir, &["no pass has samples 2..5"]);
+    expect_failure(&["merge", "p0.exr", "p0.exr", "p1.exr", "--out", "x.exr"], &dir, &["p0.exr", "given twice"]);
+    expect_failure(&["merge", "whole.exr", "--out", "x.exr"], &dir, &["whole.exr", "not a tessera pass file"]);
+    expect_failure(&["merge", "p0.exr", "p1.exr", "--out", "p0.exr"], &dir, &["p0.exr", "one of the passes"]);
+    assert!(!dir.join("x.exr").exists() && !dir.join("x.png").exists());
+}

@@ -3,15 +3,18 @@
 //!
 //! The image is split into buckets rendered in parallel by rayon ([`for_each_bucket`]). Every
 //! camera sample draws from its own random stream keyed by (seed, pixel, sample index), and
-//! every pixel is the plain mean of its own samples, so the image is bit-identical whatever the
-//! number of threads. One camera ray's path is traced by [`radiance`] (module `path`).
+//! every pixel is the plain mean of its own samples, summed exactly ([`PixelSum`]), so the image
+//! is bit-identical whatever the number of threads, and a render split into sample passes or
+//! image windows ([`RenderSettings::sample_range`], [`RenderSettings::window`]) merges into the
+//! very same image (`crate::pass`). One camera ray's path is traced by [`radiance`] (module
+//! `path`).
 
 mod path;
 
 pub use path::{radiance, recentre_fraction, spawn_ray, MAX_PASS_THROUGH};
 
 use crate::camera::CameraRay;
-use crate::film::Image;
+use crate::film::{Image, PixelSum};
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
 use crate::pathfootprint::FootprintMode;
@@ -40,6 +43,21 @@ pub struct Bucket {
 }
 
 impl Bucket {
+    /// The whole of a `width` × `height` image.
+    pub fn full(width: u32, height: u32) -> Bucket {
+        Bucket { x0: 0, y0: 0, x1: width, y1: height }
+    }
+
+    /// Width in pixels.
+    pub fn width(self) -> u32 {
+        self.x1 - self.x0
+    }
+
+    /// Height in pixels.
+    pub fn height(self) -> u32 {
+        self.y1 - self.y0
+    }
+
     /// The bucket's pixels, row by row.
     pub fn pixels(self) -> impl Iterator<Item = (u32, u32)> {
         (self.y0..self.y1).flat_map(move |y| (self.x0..self.x1).map(move |x| (x, y)))
@@ -56,15 +74,15 @@ impl Bucket {
     }
 }
 
-/// Renders the buckets of a `w` × `h` image in parallel on the current rayon pool, `work`
+/// Renders the buckets of an image window in parallel on the current rayon pool, `work`
 /// making each bucket's result; the results come back in row-major bucket order, whatever the
 /// thread count. Rendering and profiling both drive their buckets through this.
-pub fn for_each_bucket<T: Send>(w: u32, h: u32, work: &(dyn Fn(Bucket) -> T + Sync)) -> Vec<(Bucket, T)> {
-    let buckets: Vec<Bucket> = (0..h.div_ceil(BUCKET))
+pub fn for_each_bucket<T: Send>(window: Bucket, work: &(dyn Fn(Bucket) -> T + Sync)) -> Vec<(Bucket, T)> {
+    let buckets: Vec<Bucket> = (0..window.height().div_ceil(BUCKET))
         .flat_map(|by| {
-            (0..w.div_ceil(BUCKET)).map(move |bx| {
-                let (x0, y0) = (bx * BUCKET, by * BUCKET);
-                Bucket { x0, y0, x1: (x0 + BUCKET).min(w), y1: (y0 + BUCKET).min(h) }
+            (0..window.width().div_ceil(BUCKET)).map(move |bx| {
+                let (x0, y0) = (window.x0 + bx * BUCKET, window.y0 + by * BUCKET);
+                Bucket { x0, y0, x1: (x0 + BUCKET).min(window.x1), y1: (y0 + BUCKET).min(window.y1) }
             })
         })
         .collect();
@@ -82,6 +100,8 @@ pub struct RenderCounts {
     pub shadow_rays: u64,
     /// Samples whose radiance was NaN or infinite and were discarded.
     pub nonfinite_samples: u64,
+    /// Samples with a channel beyond [`crate::film::SAMPLE_LIMIT`], clamped to it.
+    pub clamped_samples: u64,
 }
 
 impl RenderCounts {
@@ -90,6 +110,7 @@ impl RenderCounts {
         self.rays += o.rays;
         self.shadow_rays += o.shadow_rays;
         self.nonfinite_samples += o.nonfinite_samples;
+        self.clamped_samples += o.clamped_samples;
     }
 }
 
@@ -102,8 +123,16 @@ pub const AOV_NO_VERTEX: f32 = footprint::LOD_MIN;
 /// What a render produced.
 #[derive(Clone, Debug)]
 pub struct RenderOutput {
-    /// The image (linear RGB).
+    /// The image (linear RGB) of the rendered window: the whole image unless
+    /// [`RenderSettings::window`] names a part.
     pub image: Image,
+    /// The window of the full image that `image` (and `sums`, `footprint_aov`) covers.
+    pub window: Bucket,
+    /// The sample indices every pixel took.
+    pub samples: std::ops::Range<u32>,
+    /// Each pixel's exact sum of its samples, row by row over the window, when
+    /// [`RenderSettings::keep_sums`] asked for it (what a pass file stores).
+    pub sums: Option<Vec<PixelSum>>,
     /// Footprint AOV when asked for: channel k is the mean LOD (log2 of the footprint's
     /// standard deviation along its major axis, in texels of the requested density) at bounce
     /// k + 1, over the samples that reached it; [`AOV_NO_VERTEX`] where none did.
@@ -138,6 +167,13 @@ pub struct RenderSettings {
     pub free_textures: bool,
     /// Scale of the texture filter relative to the footprint (see [`FilterScale`]).
     pub filter_scale: FilterScale,
+    /// The sample indices each pixel takes, `(start, end)`: a sample pass of a render of `spp`
+    /// samples per pixel. `None` takes all, `0..spp`.
+    pub sample_range: Option<(u32, u32)>,
+    /// The part of the image rendered; `None` renders all of it.
+    pub window: Option<Bucket>,
+    /// Keep each pixel's exact sum in [`RenderOutput::sums`].
+    pub keep_sums: bool,
 }
 
 /// How wide textures are filtered relative to the path footprint.
@@ -212,7 +248,16 @@ impl RenderSettings {
             footprint_aov_density: None,
             free_textures: false,
             filter_scale: FilterScale::Fixed(1.0),
+            sample_range: None,
+            window: None,
+            keep_sums: false,
         }
+    }
+
+    /// The sample indices each pixel takes.
+    pub fn samples(&self) -> std::ops::Range<u32> {
+        let (a, b) = self.sample_range.unwrap_or((0, self.spp));
+        a..b
     }
 }
 
@@ -267,7 +312,7 @@ impl PathObserver for NoObserver {}
 /// A bucket's pixels (radiance, footprint AOV), counters, graph statistics and non-finite
 /// samples.
 struct BucketResult {
-    pixels: Vec<(Spectrum, Spectrum)>,
+    pixels: Vec<(PixelSum, Spectrum)>,
     counts: RenderCounts,
     stats: Vec<graph::EvalStats>,
     nonfinite: Vec<NonFiniteSample>,
@@ -289,8 +334,9 @@ pub fn render_with<S: GraphSource>(
     progress: &(dyn Fn(u64) + Sync),
 ) -> RenderOutput {
     let start = Instant::now();
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let results = for_each_bucket(w, h, &|b| {
+    let window = settings.window.unwrap_or(Bucket::full(scene.camera.width, scene.camera.height));
+    let samples = settings.samples();
+    let results = for_each_bucket(window, &|b| {
         let mut counts = RenderCounts::default();
         let mut textures = TextureEvaluator::new(&scene.graphs, &scene.materials, source());
         let mut pixels = Vec::with_capacity(b.len());
@@ -308,8 +354,11 @@ pub fn render_with<S: GraphSource>(
             graph_nonfinite: std::mem::take(&mut textures.graph_nonfinite),
         }
     });
+    let (w, h) = (window.width(), window.height());
     let mut image = Image::new(w, h);
     let mut aov = settings.footprint_aov_density.map(|_| Image::new(w, h));
+    let mut sums = settings.keep_sums.then(|| vec![PixelSum::default(); image.pixels.len()]);
+    let n = samples.len() as u32;
     let mut counts = RenderCounts::default();
     let mut graph_stats: Vec<graph::EvalStats> = Vec::new();
     let (mut nonfinite, mut graph_nonfinite) = (Vec::new(), Vec::new());
@@ -319,9 +368,13 @@ pub fn render_with<S: GraphSource>(
         graph_nonfinite.extend_from_slice(&r.graph_nonfinite);
         graph::EvalStats::merge_all(&mut graph_stats, &r.stats);
         for ((x, y), p) in b.pixels().zip(&r.pixels) {
-            image.pixels[(y * w + x) as usize] = p.0;
+            let i = ((y - window.y0) * w + (x - window.x0)) as usize;
+            image.pixels[i] = p.0.mean(n);
             if let Some(a) = &mut aov {
-                a.pixels[(y * w + x) as usize] = p.1;
+                a.pixels[i] = p.1;
+            }
+            if let Some(s) = &mut sums {
+                s[i] = p.0;
             }
         }
     }
@@ -329,7 +382,18 @@ pub fn render_with<S: GraphSource>(
         list.sort_by_key(|n: &NonFiniteSample| (n.y, n.x, n.sample));
         list.truncate(NONFINITE_KEPT);
     }
-    RenderOutput { image, footprint_aov: aov, counts, graph_stats, nonfinite, graph_nonfinite, time: start.elapsed() }
+    RenderOutput {
+        image,
+        window,
+        samples,
+        sums,
+        footprint_aov: aov,
+        counts,
+        graph_stats,
+        nonfinite,
+        graph_nonfinite,
+        time: start.elapsed(),
+    }
 }
 
 /// Accumulates per-bounce LODs for the footprint AOV.
@@ -350,7 +414,7 @@ impl PathObserver for LodObserver {
     }
 }
 
-/// A pixel's radiance and, when asked for, its footprint AOV value.
+/// A pixel's sum of radiance samples and, when asked for, its footprint AOV value.
 fn render_pixel_aov<S: GraphSource>(
     scene: &Scene,
     settings: RenderSettings,
@@ -358,13 +422,13 @@ fn render_pixel_aov<S: GraphSource>(
     y: u32,
     counts: &mut RenderCounts,
     textures: &mut TextureEvaluator<S>,
-) -> (Spectrum, Spectrum) {
-    let spp = settings.spp;
+) -> (PixelSum, Spectrum) {
+    let samples = settings.samples();
     let Some(density) = settings.footprint_aov_density else {
-        return (render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut NoObserver), Spectrum::ZERO);
+        return (render_pixel_with(scene, settings, x, y, samples, counts, textures, &mut NoObserver), Spectrum::ZERO);
     };
     let mut obs = LodObserver { density, sum: [0.0; AOV_BOUNCES], count: [0; AOV_BOUNCES] };
-    let l = render_pixel_with(scene, settings, x, y, spp, counts, textures, &mut obs);
+    let l = render_pixel_with(scene, settings, x, y, samples, counts, textures, &mut obs);
     let lods: [f32; AOV_BOUNCES] =
         std::array::from_fn(
             |k| if obs.count[k] > 0 { (obs.sum[k] / obs.count[k] as f64) as f32 } else { AOV_NO_VERTEX },
@@ -385,35 +449,34 @@ pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (Camer
     (cam, Rng::for_sample(seed, pixel_index, u64::from(s)))
 }
 
-/// Mean radiance of one pixel over its first `samples` samples (a render takes
-/// `settings.spp`), reporting every path to `obs`; non-finite samples are left out of the mean
-/// and recorded in `textures`.
+/// The exact sum of one pixel's radiance over the samples with indices `samples` (a render
+/// takes [`RenderSettings::samples`]), reporting every path to `obs`; non-finite samples are
+/// left out of the sum (their pixel's mean still divides by every sample taken) and recorded in
+/// `textures`.
 #[allow(clippy::too_many_arguments)]
 pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
     scene: &Scene,
     settings: RenderSettings,
     x: u32,
     y: u32,
-    samples: u32,
+    samples: std::ops::Range<u32>,
     counts: &mut RenderCounts,
     textures: &mut TextureEvaluator<S>,
     obs: &mut O,
-) -> Spectrum {
-    // In f64: finite samples near f32's range (radiance 1e37 is accepted) must not sum to an
-    // infinite pixel; their mean is finite.
-    let mut sum = glam::DVec3::ZERO;
-    for s in 0..samples {
+) -> PixelSum {
+    let mut sum = PixelSum::default();
+    for s in samples {
         let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
         textures.begin_sample(s);
         let l = radiance(scene, settings, &cam, &mut rng, counts, textures, obs);
         counts.samples += 1;
         if l.is_finite() {
-            sum += l.as_dvec3();
+            counts.clamped_samples += u64::from(sum.add(l));
         } else {
             counts.nonfinite_samples += 1;
             textures.record_nonfinite(x, y, s);
         }
         textures.end_sample(x, y, s);
     }
-    (sum / f64::from(samples.max(1))).as_vec3()
+    sum
 }

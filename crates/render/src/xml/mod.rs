@@ -28,7 +28,7 @@ pub(crate) const EXCERPT_CHARS: usize = 60;
 /// `s` as a message quotes it: whole when short, otherwise its first [`EXCERPT_CHARS`]
 /// characters and its length (a scene may hold a value of megabytes; a message never echoes it
 /// whole).
-pub(crate) fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+pub fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
     match s.char_indices().nth(EXCERPT_CHARS) {
         None => std::borrow::Cow::Borrowed(s),
         Some((cut, _)) => std::borrow::Cow::Owned(format!("{}… ({} bytes)", &s[..cut], s.len())),

@@ -1,6 +1,6 @@
 //! The renderer's integration tests, one binary with a module per subject (one link instead of
 //! eight): closed-form radiance, bad input, the tile cache, footprints against Monte Carlo,
-//! MaterialX materials, partial opacity, Mitsuba's reference images and selective caching.
+//! MaterialX materials, partial opacity, split renders merged from pass files, Mitsuba's reference images and selective caching.
 
 mod analytic;
 mod bad_input;
@@ -8,5 +8,6 @@ mod caching;
 mod footprint_mc;
 mod mtlx;
 mod opacity;
+mod passes;
 mod reference;
 mod selective;

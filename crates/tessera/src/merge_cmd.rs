@@ -1,0 +1,66 @@
+//! `tessera merge` and `tessera assemble`: the pass files of one split render into its image.
+
+use anyhow::{bail, Result};
+use render::pass::{merge, Pass};
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// Pass files (`tessera render --samples A..B` or `--crop x0,y0,x1,y1`) of one render:
+    /// every sample of every pixel exactly once.
+    #[arg(required = true)]
+    passes: Vec<PathBuf>,
+    /// The image to write, .exr (linear float) or .png (sRGB 8-bit).
+    #[arg(long)]
+    out: PathBuf,
+    /// No summary.
+    #[arg(long)]
+    quiet: bool,
+}
+
+pub fn run(args: MergeArgs) -> Result<()> {
+    let ext = args.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    if ext != "exr" && ext != "png" {
+        bail!("{}: unsupported output format (expected .exr or .png)", args.out.display());
+    }
+    for p in &args.passes {
+        if p.canonicalize().ok().is_some_and(|c| args.out.canonicalize().ok() == Some(c)) {
+            bail!("{}: the output is one of the passes; write the merged image elsewhere", args.out.display());
+        }
+    }
+    let passes = args
+        .passes
+        .iter()
+        .map(|p| Ok((p.clone(), Pass::load(p)?)))
+        .collect::<Result<Vec<_>, render::error::Error>>()?;
+    let merged = merge(&passes)?;
+    merged.image.save(&args.out)?;
+    let c = merged.counts;
+    if !args.quiet {
+        eprintln!(
+            "merged {} passes of a {}x{} render at {} spp ({} samples) into {}",
+            passes.len(),
+            merged.render.width,
+            merged.render.height,
+            merged.render.spp,
+            c.samples,
+            args.out.display()
+        );
+    }
+    // Never quiet: a wrong value is reported even with --quiet.
+    if c.nonfinite_samples > 0 {
+        eprintln!(
+            "warning: {} samples had NaN or infinite radiance and were left out of their pixels (the passes' own \
+             messages and stats say where)",
+            c.nonfinite_samples
+        );
+    }
+    if c.clamped_samples > 0 {
+        eprintln!(
+            "warning: {} samples had radiance beyond {:e} and were clamped to it",
+            c.clamped_samples,
+            render::film::SAMPLE_LIMIT
+        );
+    }
+    Ok(())
+}
