@@ -152,18 +152,9 @@ pub(super) fn gradient3(h: u32, x: f32, y: f32, z: f32) -> f32 {
 }
 
 /// MaterialX `mx_perlin_noise_float(vec3)` (f32, as GLSL computes it).
+#[inline]
 pub fn perlin3_float(p: [f32; 3]) -> f32 {
-    let (x0, y0, z0) = (ifloor(p[0]), ifloor(p[1]), ifloor(p[2]));
-    let (fx, fy, fz) = (p[0] - p[0].floor(), p[1] - p[1].floor(), p[2] - p[2].floor());
-    let (u, v, w) = (fade(fx), fade(fy), fade(fz));
-    let g = |dx: i32, dy: i32, dz: i32| {
-        let h = hash::hash3(x0.wrapping_add(dx), y0.wrapping_add(dy), z0.wrapping_add(dz));
-        gradient3(h, fx - dx as f32, fy - dy as f32, fz - dz as f32)
-    };
-    let (s1, t1, r1) = (1.0 - u, 1.0 - v, 1.0 - w);
-    let r = r1 * (t1 * (g(0, 0, 0) * s1 + g(1, 0, 0) * u) + v * (g(0, 1, 0) * s1 + g(1, 1, 0) * u))
-        + w * (t1 * (g(0, 0, 1) * s1 + g(1, 0, 1) * u) + v * (g(0, 1, 1) * s1 + g(1, 1, 1) * u));
-    GRADIENT_SCALE_3D * r
+    perlin(p, Sel::Full)
 }
 
 pub(super) const GRADIENT_SCALE_3D: f32 = 0.9820;
@@ -177,18 +168,7 @@ pub(super) fn perlin_point(p: Vec2, sel: HashSel) -> f32 {
     if let HashSel::Slice(z) = sel {
         return perlin3_float([p.x, p.y, z]);
     }
-    let (x0, y0) = (ifloor(p.x), ifloor(p.y));
-    // The fraction from f32's own floor: the same as `p − x0` wherever `x0` fits an i32, and 0
-    // (a lattice point, where the noise is 0) beyond, where every f32 is a whole number.
-    let (fx, fy) = (p.x - p.x.floor(), p.y - p.y.floor());
-    let (u, v) = (fade(fx), fade(fy));
-    let h = |dx: i32, dy: i32| sel.pick(hash::hash2(x0.wrapping_add(dx), y0.wrapping_add(dy)));
-    let v0 = gradient(h(0, 0), fx, fy);
-    let v1 = gradient(h(1, 0), fx - 1.0, fy);
-    let v2 = gradient(h(0, 1), fx, fy - 1.0);
-    let v3 = gradient(h(1, 1), fx - 1.0, fy - 1.0);
-    let s1 = 1.0 - u;
-    GRADIENT_SCALE_2D * ((1.0 - v) * (v0 * s1 + v1 * u) + v * (v2 * s1 + v3 * u))
+    perlin(p.to_array(), sel)
 }
 
 /// The gradient of unfiltered Perlin noise at `p` (f64, from the corner kernels).
@@ -248,22 +228,101 @@ impl Sel {
 
 /// MaterialX `mx_perlin_noise_float(vec3)` (`Sel::Full`) or channel `k` of
 /// `mx_perlin_noise_vec3(vec3)` (`Sel::Byte(k)`).
+#[inline]
 pub(super) fn perlin3_point(p: Vec3, sel: Sel) -> f32 {
-    let (x0, y0, z0) = (ifloor(p.x), ifloor(p.y), ifloor(p.z));
-    // Fractions from f32's own floor (0 where every f32 is whole: see `perlin_point`).
-    let (fx, fy, fz) = (p.x - p.x.floor(), p.y - p.y.floor(), p.z - p.z.floor());
-    let (u, v, w) = (fade(fx), fade(fy), fade(fz));
-    let g = |dx: i32, dy: i32, dz: i32| {
-        let h = sel.pick(hash::hash3(x0.wrapping_add(dx), y0.wrapping_add(dy), z0.wrapping_add(dz)));
-        gradient3(h, fx - dx as f32, fy - dy as f32, fz - dz as f32)
-    };
-    let (s1, t1, r1) = (1.0 - u, 1.0 - v, 1.0 - w);
-    let r = r1 * (t1 * (g(0, 0, 0) * s1 + g(1, 0, 0) * u) + v * (g(0, 1, 0) * s1 + g(1, 1, 0) * u))
-        + w * (t1 * (g(0, 0, 1) * s1 + g(1, 0, 1) * u) + v * (g(0, 1, 1) * s1 + g(1, 1, 1) * u));
-    GRADIENT_SCALE_3D * r
+    perlin(p.to_array(), sel)
 }
 
 /// Unfiltered float 3D Perlin noise (MaterialX `mx_perlin_noise_float(vec3)`).
 pub fn perlin3(p: Vec3) -> f32 {
     perlin3_point(p, Sel::Full)
+}
+
+/// The integer lattice of `D`-dimensional noise (`D` = 2 or 3). [`Lattice`] holds what differs
+/// between the dimensions (the corner hash, MaterialX's gradient functions and their scale), so
+/// that the algorithms over the lattice ([`perlin`], the filtered corner sums, cell and Worley
+/// noise) are written once; each monomorphises to straight-line code for its `D`.
+pub(super) struct Dim<const D: usize>;
+
+/// A `D`-dimensional integer lattice: its corner hash and Perlin gradients.
+pub(super) trait Lattice<const D: usize> {
+    /// Which lattice of corner gradients a Perlin evaluation reads (per output channel).
+    type Sel: Copy;
+    /// MaterialX's hash of lattice cell `c` (`mx_hash_int`).
+    fn hash(c: [i32; D]) -> u32;
+    /// The bits of corner hash `h` that choose the gradient of lattice `sel`.
+    fn pick(sel: Self::Sel, h: u32) -> u32;
+    /// MaterialX `mx_gradient_float(h, d)`: the gradient chosen by `h` dotted with `d`.
+    fn gradient(h: u32, d: [f32; D]) -> f32;
+    /// MaterialX `mx_gradient_scale2d` / `3d`, applied to the corner sum (f32).
+    const GRADIENT_SCALE: f32;
+}
+
+impl Lattice<2> for Dim<2> {
+    type Sel = HashSel;
+    #[inline(always)]
+    fn hash(c: [i32; 2]) -> u32 {
+        hash::hash2(c[0], c[1])
+    }
+    #[inline(always)]
+    fn pick(sel: HashSel, h: u32) -> u32 {
+        sel.pick(h)
+    }
+    #[inline(always)]
+    fn gradient(h: u32, d: [f32; 2]) -> f32 {
+        gradient(h, d[0], d[1])
+    }
+    const GRADIENT_SCALE: f32 = GRADIENT_SCALE_2D;
+}
+
+impl Lattice<3> for Dim<3> {
+    type Sel = Sel;
+    #[inline(always)]
+    fn hash(c: [i32; 3]) -> u32 {
+        hash::hash3(c[0], c[1], c[2])
+    }
+    #[inline(always)]
+    fn pick(sel: Sel, h: u32) -> u32 {
+        sel.pick(h)
+    }
+    #[inline(always)]
+    fn gradient(h: u32, d: [f32; 3]) -> f32 {
+        gradient3(h, d[0], d[1], d[2])
+    }
+    const GRADIENT_SCALE: f32 = GRADIENT_SCALE_3D;
+}
+
+/// MaterialX Perlin noise at `p` on lattice `sel` (f32, as GLSL computes it): the corners'
+/// gradient dot products, interpolated by the fade of the fraction one axis after another
+/// (x first), times the gradient scale.
+#[inline(always)]
+pub(super) fn perlin<const D: usize>(p: [f32; D], sel: <Dim<D> as Lattice<D>>::Sel) -> f32
+where
+    Dim<D>: Lattice<D>,
+{
+    let c0 = p.map(ifloor);
+    // The fraction from f32's own floor: the same as `p − c0` wherever `c0` fits an i32, and 0
+    // (a lattice point, where the noise is 0) beyond, where every f32 is a whole number.
+    let f = p.map(|x| x - x.floor());
+    // Corner `k` has offset bit `a` of `k` along axis `a`.
+    let mut v = [0.0f32; 8];
+    for (k, vk) in v.iter_mut().enumerate().take(1 << D) {
+        let (mut c, mut d) = (c0, f);
+        for a in 0..D {
+            if k >> a & 1 == 1 {
+                c[a] = c[a].wrapping_add(1);
+                d[a] -= 1.0;
+            }
+        }
+        *vk = Dim::<D>::gradient(Dim::<D>::pick(sel, Dim::<D>::hash(c)), d);
+    }
+    let mut n = 1 << D;
+    for fa in f {
+        let u = fade(fa);
+        n /= 2;
+        for i in 0..n {
+            v[i] = v[2 * i] * (1.0 - u) + v[2 * i + 1] * u;
+        }
+    }
+    Dim::<D>::GRADIENT_SCALE * v[0]
 }
