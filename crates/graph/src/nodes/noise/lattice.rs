@@ -256,6 +256,13 @@ pub(super) trait Lattice<const D: usize> {
     fn gradient(h: u32, d: [f32; D]) -> f32;
     /// MaterialX `mx_gradient_scale2d` / `3d`, applied to the corner sum (f32).
     const GRADIENT_SCALE: f32;
+    /// Corner `c`'s kernel coefficients on lattice `sel` (`h` its hash): `D` gradient components
+    /// (each multiplying the offset along its own axis), then for 2D a constant (a `z = const`
+    /// slice of the 3D lattice folds its z layers into it; 0 otherwise). Filtered corner sums
+    /// read these.
+    fn corner(sel: Self::Sel, c: [i32; D], h: u32) -> [f64; 3];
+    /// The gradient scale of lattice `sel`, for the filtered corner sums (f64).
+    fn scale(sel: Self::Sel) -> f64;
 }
 
 impl Lattice<2> for Dim<2> {
@@ -273,6 +280,15 @@ impl Lattice<2> for Dim<2> {
         gradient(h, d[0], d[1])
     }
     const GRADIENT_SCALE: f32 = GRADIENT_SCALE_2D;
+    #[inline(always)]
+    fn corner(sel: HashSel, c: [i32; 2], h: u32) -> [f64; 3] {
+        let (g, k) = sel.corner(c[0], c[1], h);
+        [g.x, g.y, k]
+    }
+    #[inline(always)]
+    fn scale(sel: HashSel) -> f64 {
+        sel.scale()
+    }
 }
 
 impl Lattice<3> for Dim<3> {
@@ -290,6 +306,14 @@ impl Lattice<3> for Dim<3> {
         gradient3(h, d[0], d[1], d[2])
     }
     const GRADIENT_SCALE: f32 = GRADIENT_SCALE_3D;
+    #[inline(always)]
+    fn corner(sel: Sel, _: [i32; 3], h: u32) -> [f64; 3] {
+        gradient3_vector(sel.pick(h))
+    }
+    #[inline(always)]
+    fn scale(_: Sel) -> f64 {
+        GRADIENT_SCALE_3D as f64
+    }
 }
 
 /// MaterialX Perlin noise at `p` on lattice `sel` (f32, as GLSL computes it): the corners'

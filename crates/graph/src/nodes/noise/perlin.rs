@@ -2,10 +2,9 @@
 
 use super::filter::{axis_terms, axis_terms_exact, AxisTerms};
 use super::lattice::{
-    gradient3_vector, perlin3_point, perlin_gradient, perlin_point, within_lattice_precision, HashSel, Sel,
-    GRADIENT_SCALE_3D, LATTICE_PRECISION_LIMIT,
+    perlin3_point, perlin_gradient, perlin_point, within_lattice_precision, Dim, HashSel, Lattice, Sel,
+    LATTICE_PRECISION_LIMIT,
 };
-use crate::nodes::hash;
 use crate::nodes::Ctx;
 use crate::value::Moments;
 use glam::{DVec2, DVec3, Vec2};
@@ -83,40 +82,98 @@ pub(super) fn perlin_exact_n<const N: usize, const TABLE: bool>(
     out: &mut [(f64, f64, f64); 4],
     work: &mut crate::eval::Work,
 ) {
-    let mut xs = [(0i32, AxisTerms::default()); N];
-    let mut ys = [(0i32, AxisTerms::default()); N];
-    let fill = |m: f64, s: f64, buf: &mut [(i32, AxisTerms); N]| -> usize {
+    let mut r = [[0.0; 4]; 4];
+    corner_sum::<2, N, TABLE>(p.to_array(), s.to_array(), tail, sels, &mut r, work);
+    for (o, r) in out.iter_mut().zip(r) {
+        *o = (r[0], r[1], r[2]);
+    }
+}
+
+/// The Gaussian average of the Perlin corner sum over `N(p, diag(s²))` and its derivatives with
+/// respect to `p`, for up to 4 lattices at once: per channel `[value, ∂/∂p₀, …, ∂/∂p_{D−1}]`.
+/// Every lattice coordinate whose kernel support `(c − 1, c + 1)` meets `p ± tail·s` is visited
+/// along each axis (at most `N`). Corner `c`'s kernel is `Σᵢ gᵢ Πₐ Kᵢₐ` with `Kᵢₐ = dW` on the
+/// coefficient's own axis and `W` on the others ([`Lattice::corner`]; a 2D slice's third
+/// coefficient is a constant, `W` on both axes), so its average is a product of one 1D
+/// expectation per axis ([`AxisTerms`]): each axis's are computed once per lattice coordinate,
+/// the products over the outer axes (all but x) once per outer cell, and the x loop combines
+/// them with the hashed gradients. `TABLE` reads the 1D expectations from the table, otherwise
+/// they are integrated exactly.
+#[inline(always)]
+pub(super) fn corner_sum<const D: usize, const N: usize, const TABLE: bool>(
+    p: [f64; D],
+    s: [f64; D],
+    tail: f64,
+    sels: &[<Dim<D> as Lattice<D>>::Sel],
+    out: &mut [[f64; 4]; 4],
+    work: &mut crate::eval::Work,
+) where
+    Dim<D>: Lattice<D>,
+{
+    let mut axes = [[(0i32, AxisTerms::default()); N]; D];
+    let mut n = [0usize; D];
+    for a in 0..D {
+        let (m, s) = (p[a], s[a]);
         // Every c whose support (c − 1, c + 1) meets [m − tail, m + tail].
         let lo = (m - 1.0 - tail * s).floor() as i32 + 1;
         let hi = (m + 1.0 + tail * s).ceil() as i32 - 1;
         debug_assert!(hi - lo < N as i32, "{} lattice coordinates at σ = {s}", hi - lo + 1);
-        if TABLE {
-            axis_terms(m, s, lo, hi, buf)
-        } else {
-            axis_terms_exact(m, s, lo, hi, buf)
-        }
-    };
-    let nx = fill(p.x, s.x, &mut xs);
-    let ny = fill(p.y, s.y, &mut ys);
-    for o in out.iter_mut() {
-        *o = (0.0, 0.0, 0.0);
+        n[a] =
+            if TABLE { axis_terms(m, s, lo, hi, &mut axes[a]) } else { axis_terms_exact(m, s, lo, hi, &mut axes[a]) };
     }
-    for &(cy, ty) in &ys[..ny] {
-        for &(cx, tx) in &xs[..nx] {
-            let h = hash::hash2(cx, cy);
-            for (k, sel) in sels.iter().enumerate() {
-                let (g, c) = sel.corner(cx, cy, h);
-                let o = &mut out[k];
-                o.0 += g.x * tx.dw * ty.w + g.y * tx.w * ty.dw + c * tx.w * ty.w;
-                o.1 += g.x * tx.dw1 * ty.w + g.y * tx.w1 * ty.dw + c * tx.w1 * ty.w;
-                o.2 += g.x * tx.dw * ty.w1 + g.y * tx.w * ty.dw1 + c * tx.w * ty.w1;
+    *out = [[0.0; 4]; 4];
+    // The outer cells in order, axis 1 fastest (an odometer over axes 1..D).
+    let outer: usize = n[1..].iter().product();
+    let mut at = [0usize; D];
+    let mut c = [0i32; D];
+    for _ in 0..outer {
+        // f[r][i]: coefficient i's product over the outer axes, differentiated along axis r ≥ 1
+        // (r = 0: the value).
+        let mut f = [[1.0f64; 3]; D];
+        for a in 1..D {
+            let (ca, t) = axes[a][at[a]];
+            c[a] = ca;
+            for (r, fr) in f.iter_mut().enumerate() {
+                for (i, fri) in fr.iter_mut().enumerate() {
+                    *fri *= match (r == a, i == a) {
+                        (false, false) => t.w,
+                        (false, true) => t.dw,
+                        (true, false) => t.w1,
+                        (true, true) => t.dw1,
+                    };
+                }
             }
         }
+        for &(cx, tx) in &axes[0][..n[0]] {
+            c[0] = cx;
+            let h = Dim::<D>::hash(c);
+            let (x, x1) = ([tx.dw, tx.w, tx.w], [tx.dw1, tx.w1, tx.w1]);
+            for (k, sel) in sels.iter().enumerate() {
+                let g = Dim::<D>::corner(*sel, c, h);
+                let o = &mut out[k];
+                let f0 = &f[0];
+                o[0] += g[0] * x[0] * f0[0] + g[1] * x[1] * f0[1] + g[2] * x[2] * f0[2];
+                o[1] += g[0] * x1[0] * f0[0] + g[1] * x1[1] * f0[1] + g[2] * x1[2] * f0[2];
+                for a in 1..D {
+                    let fa = &f[a];
+                    o[1 + a] += g[0] * x[0] * fa[0] + g[1] * x[1] * fa[1] + g[2] * x[2] * fa[2];
+                }
+            }
+        }
+        for a in 1..D {
+            at[a] += 1;
+            if at[a] < n[a] {
+                break;
+            }
+            at[a] = 0;
+        }
     }
-    work.lattice += (nx * ny) as u64;
+    work.lattice += n.iter().product::<usize>() as u64;
     for (o, sel) in out.iter_mut().zip(sels) {
-        let k = sel.scale();
-        *o = (o.0 * k, o.1 * k, o.2 * k);
+        let k = Dim::<D>::scale(*sel);
+        for v in o.iter_mut().take(D + 1) {
+            *v *= k;
+        }
     }
 }
 
@@ -225,40 +282,10 @@ pub(super) fn perlin3_exact(
     out: &mut [(f64, DVec3); 4],
     work: &mut crate::eval::Work,
 ) {
-    let mut axes = [[(0i32, AxisTerms::default()); MAX_AXIS]; 3];
-    let mut n = [0usize; 3];
-    for k in 0..3 {
-        let (m, sk) = (p[k], s[k]);
-        let lo = (m - 1.0 - 4.0 * sk).floor() as i32 + 1;
-        let hi = (m + 1.0 + 4.0 * sk).ceil() as i32 - 1;
-        n[k] = axis_terms(m, sk, lo, hi, &mut axes[k]);
-    }
-    for o in out.iter_mut() {
-        *o = (0.0, DVec3::ZERO);
-    }
-    for &(cz, tz) in &axes[2][..n[2]] {
-        for &(cy, ty) in &axes[1][..n[1]] {
-            // Products of two axes' terms shared by the x loop.
-            let (ww, dw_w, w_dw) = (ty.w * tz.w, ty.dw * tz.w, ty.w * tz.dw);
-            let (w1w, dw1w, w1dw) = (ty.w1 * tz.w, ty.dw1 * tz.w, ty.w1 * tz.dw);
-            let (ww1, dww1, wdw1) = (ty.w * tz.w1, ty.dw * tz.w1, ty.w * tz.dw1);
-            for &(cx, tx) in &axes[0][..n[0]] {
-                let h = hash::hash3(cx, cy, cz);
-                for (k, sel) in sels.iter().enumerate() {
-                    let g = gradient3_vector(sel.pick(h));
-                    let o = &mut out[k];
-                    o.0 += g[0] * tx.dw * ww + g[1] * tx.w * dw_w + g[2] * tx.w * w_dw;
-                    o.1.x += g[0] * tx.dw1 * ww + g[1] * tx.w1 * dw_w + g[2] * tx.w1 * w_dw;
-                    o.1.y += g[0] * tx.dw * w1w + g[1] * tx.w * dw1w + g[2] * tx.w * w1dw;
-                    o.1.z += g[0] * tx.dw * ww1 + g[1] * tx.w * dww1 + g[2] * tx.w * wdw1;
-                }
-            }
-        }
-    }
-    work.lattice += (n[0] * n[1] * n[2]) as u64;
-    let k = GRADIENT_SCALE_3D as f64;
-    for o in out.iter_mut().take(sels.len()) {
-        *o = (o.0 * k, o.1 * k);
+    let mut r = [[0.0; 4]; 4];
+    corner_sum::<3, MAX_AXIS, true>(p.to_array(), s.to_array(), 4.0, sels, &mut r, work);
+    for (o, r) in out.iter_mut().zip(r) {
+        *o = (r[0], DVec3::new(r[1], r[2], r[3]));
     }
 }
 
