@@ -1,6 +1,6 @@
 //! Fractal (fBm) octave sums.
 
-use super::lattice::{perlin3_point, perlin_point, HashSel, Sel};
+use super::lattice::{perlin, Dim, HashSel, Lattice, Sel};
 use super::perlin::{perlin3_octave, perlin_octave, M3, PERLIN3_VARIANCE};
 use crate::nodes::Ctx;
 use crate::value::Moments;
@@ -98,28 +98,36 @@ pub(super) fn fractal_sum(
 
 /// Unfiltered fractal noise (for tests and the point path).
 pub fn fractal_point(p: Vec2, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
-    let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
-    for _ in 0..octaves.min(MAX_OCTAVES as i32) {
-        if !(octave_counts(a, 1.0) && q.is_finite()) {
-            break;
-        }
-        r += a * perlin_point(q, HashSel::Full) as f64;
-        a *= diminish as f64;
-        q *= lacunarity;
-    }
-    r as f32
+    fractal(p.to_array(), HashSel::Full, octaves, lacunarity, diminish)
 }
 
 /// Unfiltered float 3D fractal noise (MaterialX `mx_fractal_noise_float(vec3)`).
 pub fn fractal3_point(p: Vec3, octaves: i32, lacunarity: f32, diminish: f32) -> f32 {
+    fractal(p.to_array(), Sel::Full, octaves, lacunarity, diminish)
+}
+
+/// Unfiltered fractal noise on lattice `sel`: `Σ diminishⁱ perlin(p · lacunarityⁱ)` (f64 sum,
+/// f32 octaves) under the fractals' total rule ([`octave_counts`]; the octave stops where the
+/// coordinate leaves the f32 range).
+#[inline]
+fn fractal<const D: usize>(
+    p: [f32; D],
+    sel: <Dim<D> as Lattice<D>>::Sel,
+    octaves: i32,
+    lacunarity: f32,
+    diminish: f32,
+) -> f32
+where
+    Dim<D>: Lattice<D>,
+{
     let (mut r, mut a, mut q) = (0.0f64, 1.0f64, p);
     for _ in 0..octaves.min(MAX_OCTAVES as i32) {
-        if !(octave_counts(a, 1.0) && q.is_finite()) {
+        if !(octave_counts(a, 1.0) && q.iter().all(|x| x.is_finite())) {
             break;
         }
-        r += a * perlin3_point(q, Sel::Full) as f64;
+        r += a * perlin(q, sel) as f64;
         a *= diminish as f64;
-        q *= lacunarity;
+        q = q.map(|x| x * lacunarity);
     }
     r as f32
 }
