@@ -1,5 +1,6 @@
 //! Unfiltered MaterialX Perlin lattices (f32, as GLSL computes them).
 
+use super::cell::{cell_axis, cell_axis_shared};
 use super::perlin::{
     share_model, PERLIN3_SLICE_KAPPA, PERLIN3_SLICE_SHARE, PERLIN_KAPPA, PERLIN_SHARE, PERLIN_VARIANCE,
 };
@@ -263,6 +264,13 @@ pub(super) trait Lattice<const D: usize> {
     fn corner(sel: Self::Sel, c: [i32; D], h: u32) -> [f64; 3];
     /// The gradient scale of lattice `sel`, for the filtered corner sums (f64).
     fn scale(sel: Self::Sel) -> f64;
+    /// Cell noise of cell `c`: MaterialX `mx_cell_noise_float`, or channel `k` of
+    /// `mx_cell_noise_vec3` when `vector`.
+    fn cell(c: [i32; D], k: usize, vector: bool) -> f32;
+    /// The footprint's cell masses along one axis (`N(m, s²)`): (cell, mass, d mass / d m) per
+    /// cell, returning how many. The dimensions compute the masses with different rounding
+    /// ([`cell_axis_shared`], [`cell_axis`]), each kept as it was.
+    fn cell_axis(m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]) -> usize;
 }
 
 impl Lattice<2> for Dim<2> {
@@ -289,6 +297,18 @@ impl Lattice<2> for Dim<2> {
     fn scale(sel: HashSel) -> f64 {
         sel.scale()
     }
+    #[inline(always)]
+    fn cell(c: [i32; 2], k: usize, vector: bool) -> f32 {
+        if vector {
+            hash::cell_vec3(c[0], c[1], k as i32)
+        } else {
+            hash::cell_float(c[0], c[1])
+        }
+    }
+    #[inline(always)]
+    fn cell_axis(m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]) -> usize {
+        cell_axis_shared(m, s, buf)
+    }
 }
 
 impl Lattice<3> for Dim<3> {
@@ -313,6 +333,18 @@ impl Lattice<3> for Dim<3> {
     #[inline(always)]
     fn scale(_: Sel) -> f64 {
         GRADIENT_SCALE_3D as f64
+    }
+    #[inline(always)]
+    fn cell(c: [i32; 3], k: usize, vector: bool) -> f32 {
+        if vector {
+            hash::cell3_vec3(c[0], c[1], c[2], k as i32)
+        } else {
+            hash::cell3_float(c[0], c[1], c[2])
+        }
+    }
+    #[inline(always)]
+    fn cell_axis(m: f64, s: f64, buf: &mut [(i32, f64, f64); 8]) -> usize {
+        cell_axis(m, s, buf)
     }
 }
 
