@@ -34,7 +34,7 @@ const D_MAX: f64 = 4.0;
 const ND: usize = (D_MAX * D_RES) as usize + 1;
 /// Rows per unit of `s`.
 const S_RES: f64 = 128.0;
-/// Largest tabulated spread (lattice units): [`super::noise::PERLIN_SIGMA_EXACT`].
+/// Largest tabulated spread (lattice units): [`super::noise::perlin::PERLIN_SIGMA_EXACT`].
 pub(crate) const S_MAX: f64 = 0.75;
 const NS: usize = (S_MAX * S_RES) as usize + 1;
 

@@ -14,7 +14,6 @@ pub(crate) mod image;
 pub(crate) mod kernel_table;
 pub(crate) mod math;
 pub(crate) mod noise;
-pub(crate) mod noise3d;
 pub(crate) mod normal;
 pub(crate) mod pattern;
 pub(crate) mod shape;
@@ -227,7 +226,7 @@ pub enum Op {
     /// `noise2d`, `fractal2d`, `cellnoise2d`, `worleynoise2d`, `unifiednoise2d`.
     Noise(noise::NoiseOp),
     /// `noise3d`, `fractal3d`, `cellnoise3d`, `worleynoise3d`, `unifiednoise3d`.
-    Noise3d(noise3d::Noise3dOp),
+    Noise3d(noise::Noise3dOp),
     /// Shapes, ramps, splits, random values.
     Pattern(pattern::PatternOp),
     /// `circle`, `line`, `hexagon`, `grid`, `crosshatch`, `tiledcircles`, `tiledhexagons`.
@@ -261,7 +260,7 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
     let mut out = match op {
         Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
         Op::Noise(n) => noise::eval(n, ty, ins, ctx),
-        Op::Noise3d(n) => noise3d::eval(n, ty, ins, ctx),
+        Op::Noise3d(n) => noise::eval3d(n, ty, ins, ctx),
         Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
         Op::Shape(s) => shape::eval(s, ty, ins, ctx),
         Op::Math(m) => math::eval(m, ty, ins, ctx),
@@ -317,7 +316,7 @@ pub fn supported() -> Vec<&'static str> {
     for f in [
         geometry::CATEGORIES,
         noise::CATEGORIES,
-        noise3d::CATEGORIES,
+        noise::CATEGORIES_3D,
         pattern::CATEGORIES,
         shape::CATEGORIES,
         math::CATEGORIES,
@@ -343,7 +342,7 @@ pub fn supported_list() -> String {
 pub fn definition(category: &str) -> Option<NodeDef> {
     geometry::definition(category)
         .or_else(|| noise::definition(category))
-        .or_else(|| noise3d::definition(category))
+        .or_else(|| noise::definition3d(category))
         .or_else(|| pattern::definition(category))
         .or_else(|| shape::definition(category))
         .or_else(|| math::definition(category))

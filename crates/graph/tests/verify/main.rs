@@ -13,6 +13,7 @@ mod geometry;
 mod hextile;
 mod logic;
 mod mtlx_features;
+mod noise_identity;
 mod ramp;
 mod random_graphs;
 mod shading_models;
