@@ -307,9 +307,20 @@ impl Selection {
                 [] => {
                     let all: Vec<&str> =
                         graphs.iter().flat_map(|g| g.graph().node_ids().map(|id| g.graph().node_name(id))).collect();
+                    // Names that contain the one asked for first (a misspelt or partial name),
+                    // and never more than a few: a scene may have thousands of nodes.
+                    const SHOWN: usize = 8;
+                    let lower = name.to_lowercase();
+                    let (near, far): (Vec<&str>, Vec<&str>) =
+                        all.iter().partition(|n| n.to_lowercase().contains(&lower));
+                    let shown: Vec<&str> = near.iter().chain(&far).take(SHOWN).copied().collect();
+                    let more = all.len() - shown.len();
+                    let tail = if more > 0 { format!(", and {more} more") } else { String::new() };
+                    let what = if near.is_empty() { "the scene's nodes" } else { "nodes with that in their name" };
                     return Err(Error::plain(format!(
-                        "--strategy nodes: no node named '{name}' (nodes: {})",
-                        all.join(", ")
+                        "--strategy nodes: no node named '{}' ({what}: {}{tail})",
+                        crate::xml::excerpt(name),
+                        shown.join(", ")
                     )));
                 }
                 _ => {

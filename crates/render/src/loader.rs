@@ -152,9 +152,12 @@ pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
     if !path.is_file() {
         return Err(crate::error::Error::in_file(path, "scene file not found"));
     }
-    let root = xml::parse_file(path, defines)?;
+    let (root, includes) = xml::parse_file_with_includes(path, defines)?;
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
-    Builder::new(base).build(&root)
+    let mut b = Builder::new(base);
+    b.files.push(path.to_path_buf());
+    b.files.extend(includes);
+    b.build(&root)
 }
 
 /// Loads a scene from text; relative file names resolve against `base_dir`.
@@ -171,8 +174,9 @@ pub fn load_str_with_files(
     defines: &[(String, String)],
     files: &[(&str, &str)],
 ) -> Result<Scene> {
-    let root = xml::parse_str(text, virtual_path, defines)?;
+    let (root, includes) = xml::parse_with_includes(text, virtual_path, defines)?;
     let mut b = Builder::new(base_dir.to_path_buf());
+    b.files.extend(includes);
     b.embedded = files.iter().map(|(n, t)| (n.to_string(), t.to_string())).collect();
     b.build(&root)
 }
@@ -195,6 +199,8 @@ struct Builder {
     material_ids: HashMap<*const Object, u32>,
     emitters: Vec<Emitter>,
     bitmaps: HashMap<(PathBuf, bool), Arc<Bitmap>>,
+    /// Every file read so far ([`Scene::files`]).
+    files: Vec<PathBuf>,
 }
 
 fn mat4_to_affine(m: Mat4) -> Affine3A {
@@ -237,6 +243,7 @@ impl Builder {
             material_ids: HashMap::new(),
             emitters: Vec::new(),
             bitmaps: HashMap::new(),
+            files: Vec::new(),
         }
     }
 
@@ -304,6 +311,10 @@ impl Builder {
             // Procedural graphs are filtered by footprint; Mitsuba's bitmaps are not mip-mapped.
             footprints_needed,
             masked,
+            files: {
+                let mut seen = std::collections::HashSet::new();
+                self.files.into_iter().filter(|f| seen.insert(f.clone())).collect()
+            },
         })
     }
 
@@ -452,6 +463,7 @@ impl Builder {
             return Err(obj.error(format!("image file '{}' not found", path.display())));
         }
         let b = Arc::new(Bitmap::load(&path, raw)?);
+        self.files.push(path.clone());
         self.bitmaps.insert((path, raw), b.clone());
         Ok(b)
     }
@@ -729,6 +741,7 @@ impl Builder {
                 } else {
                     crate::mesh::load_ply(&path, obj.bool("flip_tex_coords", false)?)?
                 };
+                self.files.push(path.clone());
                 for w in mesh.validate(&path)? {
                     eprintln!("warning: {w}");
                 }
@@ -914,6 +927,17 @@ impl Builder {
         .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
         for w in doc.graph().warnings() {
             eprintln!("warning: {}: {w}", path.display());
+        }
+        if !self.embedded.contains_key(file) {
+            self.files.extend(doc.files().iter().cloned());
+            let g = doc.graph();
+            for id in g.node_ids() {
+                for p in g.node_params(id) {
+                    if let graph::nodes::Param::File { path, .. } = p {
+                        self.files.push(path.clone());
+                    }
+                }
+            }
         }
         let doc = Arc::new(doc);
         let index = self.graphs.len() as u32;

@@ -5,6 +5,7 @@ use crate::camera::{Camera, Rfilter};
 use crate::emitter::Emitter;
 use crate::geometry::{Intersector, Shape};
 use crate::material::{Material, SceneGraph};
+use std::path::PathBuf;
 
 /// Settings of Mitsuba's `path` integrator.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,4 +47,8 @@ pub struct Scene {
     /// shadow rays gather the transmittance of the surfaces they cross instead of stopping at
     /// the first.
     pub masked: bool,
+    /// Every file the scene was built from, each once, the scene file first: its includes,
+    /// meshes, images, MaterialX documents (with their includes) and the images they name. What
+    /// a render elsewhere needs copied (files supplied in memory are not listed).
+    pub files: Vec<PathBuf>,
 }

@@ -17,6 +17,20 @@ use std::time::Instant;
 /// Arguments of `tessera bake`.
 #[derive(clap::Args, Debug)]
 pub struct BakeArgs {
+    /// What to bake, and how.
+    #[command(flatten)]
+    pub(crate) bake: BakeJob,
+    /// Output image: .exr (linear float) or .png (8-bit sRGB).
+    #[arg(long)]
+    out: PathBuf,
+    /// No summary line.
+    #[arg(long)]
+    quiet: bool,
+}
+
+/// What `tessera bake` evaluates: a document's element on a grid of texels.
+#[derive(clap::Args, Debug)]
+pub(crate) struct BakeJob {
     /// The MaterialX document.
     document: PathBuf,
     /// What to bake: a node graph output (`nodegraph/output`, or `output` at the top level) or a
@@ -29,9 +43,6 @@ pub struct BakeArgs {
     /// Rows (default: --res).
     #[arg(long)]
     res_y: Option<u32>,
-    /// Output image: .exr (linear float) or .png (8-bit sRGB).
-    #[arg(long)]
-    out: PathBuf,
     /// uv at the left and v0 edges: u,v.
     #[arg(long, default_value = "0,0", value_parser = parse_uv, allow_hyphen_values = true)]
     uv_min: Vec2,
@@ -52,9 +63,41 @@ pub struct BakeArgs {
     /// Worker threads (default: all cores); the image does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
-    /// No summary line.
-    #[arg(long)]
-    quiet: bool,
+}
+
+/// A finished bake: the image, the element's type, the threads it ran on and its seconds.
+pub(crate) struct Baked {
+    pub image: BakedImage,
+    pub ty: graph::ValueType,
+    pub threads: usize,
+    pub seconds: f64,
+}
+
+impl BakeJob {
+    /// Loads the document and bakes the element.
+    pub(crate) fn run(&self) -> Result<Baked> {
+        crate::check_threads(self.threads)?;
+        let settings = BakeSettings {
+            width: self.res,
+            height: self.res_y.unwrap_or(self.res),
+            uv_min: self.uv_min,
+            uv_max: self.uv_max,
+            filter: self.filter,
+            orientation: self.orientation,
+        };
+        settings.validate()?;
+        // Lenient: nodes the element does not need may be unsupported; if it needs one,
+        // resolving it reports which (with their lines).
+        let opts = LoadOptions { search_paths: self.search_paths.clone(), lenient: true };
+        let doc = Document::load_with(&self.document, &opts)?;
+        let (source, ty) = bake::resolve(&doc, &self.element).with_context(|| self.document.display().to_string())?;
+        let threads = self.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+        let pool =
+            rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
+        let t = Instant::now();
+        let image = pool.install(|| bake::bake(doc.graph(), &source, ty, &settings))?;
+        Ok(Baked { image, ty, threads, seconds: t.elapsed().as_secs_f64() })
+    }
 }
 
 fn parse_uv(s: &str) -> Result<Vec2, String> {
@@ -72,32 +115,13 @@ pub fn run(args: BakeArgs) -> Result<()> {
     if ext != "exr" && ext != "png" {
         bail!("{}: unsupported output format (expected .exr or .png)", args.out.display());
     }
-    crate::check_threads(args.threads)?;
-    let settings = BakeSettings {
-        width: args.res,
-        height: args.res_y.unwrap_or(args.res),
-        uv_min: args.uv_min,
-        uv_max: args.uv_max,
-        filter: args.filter,
-        orientation: args.orientation,
-    };
-    settings.validate()?;
-    // Lenient: nodes the element does not need may be unsupported; if it needs one, resolving it
-    // reports which (with their lines).
-    let opts = LoadOptions { search_paths: args.search_paths.clone(), lenient: true };
-    let doc = Document::load_with(&args.document, &opts)?;
-    let (source, ty) = bake::resolve(&doc, &args.element).with_context(|| args.document.display().to_string())?;
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
-    let t = Instant::now();
-    let img = pool.install(|| bake::bake(doc.graph(), &source, ty, &settings))?;
-    let bake_s = t.elapsed().as_secs_f64();
+    let Baked { image: img, ty, threads, seconds: bake_s } = args.bake.run()?;
     let bytes = if ext == "exr" { encode_exr(&img)? } else { encode_png(&img)? };
     write_atomic(&args.out, &bytes)?;
     if !args.quiet {
         eprintln!(
             "baked {} ({ty}) at {}x{} in {bake_s:.2} s on {threads} threads; wrote {}",
-            args.element,
+            args.bake.element,
             img.width,
             img.height,
             args.out.display()

@@ -92,31 +92,10 @@ impl PathObserver for Recorder {
 pub fn run(args: FootprintArgs) -> Result<()> {
     let defines = parse_defines(&args.define)?;
     let scene = load_scene(args.scene.as_deref(), &defines)?;
-    let (x, y) = (args.pixel[0], args.pixel[1]);
-    if x >= scene.camera.width || y >= scene.camera.height {
-        bail!("--pixel {x} {y} is outside the {}×{} image", scene.camera.width, scene.camera.height);
-    }
-    if !(args.density.is_finite() && args.density > 0.0) {
-        bail!("--density must be a positive number, got {}", args.density);
-    }
-    let seed = args.seed.unwrap_or(scene.seed);
-    let settings = RenderSettings { footprint: args.footprint, ..RenderSettings::new(scene.spp, seed) };
-    // Sample 0 of this pixel, with the same stream and filter offset as `tessera render`.
-    let (cam, mut rng) = render::integrator::camera_sample(&scene, seed, x, y, 0);
-    let mut rec = Recorder { density: args.density, vertices: Vec::new() };
-    let mut shade = render::shading::TextureEvaluator::new(&scene.graphs, &scene.materials, render::shading::Direct);
-    let l = radiance(&scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut rec);
-    // A vertex without an event is where a path ended by Russian roulette after scattering.
-    let out = json!({
-        "schema": "tessera.footprint/1",
-        "scene": args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "<embedded default scene>".into()),
-        "pixel": [x, y],
-        "seed": seed,
-        "estimator": format!("{:?}", args.footprint).to_lowercase(),
-        "density": args.density,
-        "radiance": [l.x, l.y, l.z],
-        "vertices": rec.vertices,
-    });
+    let name =
+        args.scene.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "<embedded default scene>".into());
+    let out = trace(&scene, &name, (args.pixel[0], args.pixel[1]), args.seed, args.footprint, args.density)?;
+    let (x, y, seed) = (args.pixel[0], args.pixel[1], &out["seed"]);
     if args.json {
         println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
@@ -133,4 +112,40 @@ pub fn run(args: FootprintArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Traces sample 0 of `pixel` (with the scene's seed when `seed` is `None`), exactly as
+/// `tessera render` traces it, and returns its vertices' footprints (`tessera.footprint/1`).
+pub(crate) fn trace(
+    scene: &render::scene::Scene,
+    name: &str,
+    (x, y): (u32, u32),
+    seed: Option<u64>,
+    estimator: FootprintMode,
+    density: f64,
+) -> Result<Value> {
+    if x >= scene.camera.width || y >= scene.camera.height {
+        bail!("--pixel {x} {y} is outside the {}×{} image", scene.camera.width, scene.camera.height);
+    }
+    if !(density.is_finite() && density > 0.0) {
+        bail!("--density must be a positive number, got {density}");
+    }
+    let seed = seed.unwrap_or(scene.seed);
+    let settings = RenderSettings { footprint: estimator, ..RenderSettings::new(scene.spp, seed) };
+    // Sample 0 of this pixel, with the same stream and filter offset as `tessera render`.
+    let (cam, mut rng) = render::integrator::camera_sample(scene, seed, x, y, 0);
+    let mut rec = Recorder { density, vertices: Vec::new() };
+    let mut shade = render::shading::TextureEvaluator::new(&scene.graphs, &scene.materials, render::shading::Direct);
+    let l = radiance(scene, settings, &cam, &mut rng, &mut RenderCounts::default(), &mut shade, &mut rec);
+    // A vertex without an event is where a path ended by Russian roulette after scattering.
+    Ok(json!({
+        "schema": "tessera.footprint/1",
+        "scene": name,
+        "pixel": [x, y],
+        "seed": seed,
+        "estimator": format!("{estimator:?}").to_lowercase(),
+        "density": density,
+        "radiance": [l.x, l.y, l.z],
+        "vertices": rec.vertices,
+    }))
 }

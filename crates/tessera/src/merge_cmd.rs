@@ -1,7 +1,6 @@
 //! `tessera merge` and `tessera assemble`: the pass files of one split render into its image.
 
 use anyhow::{bail, Result};
-use render::pass::{merge, Pass};
 use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
@@ -28,18 +27,13 @@ pub fn run(args: MergeArgs) -> Result<()> {
             bail!("{}: the output is one of the passes; write the merged image elsewhere", args.out.display());
         }
     }
-    let passes = args
-        .passes
-        .iter()
-        .map(|p| Ok((p.clone(), Pass::load(p)?)))
-        .collect::<Result<Vec<_>, render::error::Error>>()?;
-    let merged = merge(&passes)?;
+    let merged = crate::api::merge(&args.passes)?;
     merged.image.save(&args.out)?;
     let c = merged.counts;
     if !args.quiet {
         eprintln!(
             "merged {} passes of a {}x{} render at {} spp ({} samples) into {}",
-            passes.len(),
+            args.passes.len(),
             merged.render.width,
             merged.render.height,
             merged.render.spp,

@@ -21,6 +21,7 @@ mod transform;
 
 pub use object::{Object, Param, Value};
 pub use parser::{parse_file, parse_str};
+pub(crate) use parser::{parse_file_with_includes, parse_with_includes};
 
 /// At most this many characters of a value from the scene go into a message.
 pub(crate) const EXCERPT_CHARS: usize = 60;

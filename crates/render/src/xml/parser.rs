@@ -16,16 +16,33 @@ const MAX_INCLUDE_DEPTH: usize = 16;
 /// Parses the scene file at `path`. `defines` are `-D name=value` pairs from the command line:
 /// they override the scene's `<default>`s.
 pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
+    parse_file_with_includes(path, defines).map(|(root, _)| root)
+}
+
+/// [`parse_file`], with the files its `<include>`s read (in the order they were read).
+pub(crate) fn parse_file_with_includes(
+    path: &Path,
+    defines: &[(String, String)],
+) -> Result<(Rc<Object>, Vec<PathBuf>)> {
     let text = read_text(path).map_err(|e| match e {
         Ok(io) => Error::in_file(path, format!("cannot read scene file: {io}")),
         Err(at) => at,
     })?;
-    parse_str(&text, path, defines)
+    parse_with_includes(&text, path, defines)
 }
 
 /// Parses a scene given as text; `virtual_path` names it in messages and is the base for
 /// relative `<include>` file names.
 pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
+    parse_with_includes(text, virtual_path, defines).map(|(root, _)| root)
+}
+
+/// [`parse_str`], with the files its `<include>`s read.
+pub(crate) fn parse_with_includes(
+    text: &str,
+    virtual_path: &Path,
+    defines: &[(String, String)],
+) -> Result<(Rc<Object>, Vec<PathBuf>)> {
     for (name, _) in defines {
         if name.is_empty() || !name.chars().all(is_var_char) {
             return Err(Error::plain(format!("invalid define name '{name}': use letters, digits and '_' only")));
@@ -37,6 +54,7 @@ pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) 
         ids: HashMap::new(),
         include_depth: 0,
         read_vars: Default::default(),
+        includes: Vec::new(),
     };
     let file = Arc::new(virtual_path.to_path_buf());
     let doc = parse_xml(text, &file)?;
@@ -58,7 +76,7 @@ pub fn parse_str(text: &str, virtual_path: &Path, defines: &[(String, String)]) 
             virtual_path.display()
         );
     }
-    Ok(scene)
+    Ok((scene, parser.includes))
 }
 
 /// The command-line defines that no `<default>` of the scene (or its includes) declares and
@@ -269,6 +287,8 @@ pub(super) struct Parser {
     include_depth: usize,
     /// The variables `$name` substitutions read (a define none reads nor declares is reported).
     read_vars: std::cell::RefCell<std::collections::HashSet<String>>,
+    /// The files `<include>`s read.
+    includes: Vec<PathBuf>,
 }
 
 impl Parser {
@@ -500,6 +520,7 @@ impl Parser {
             Ok(io) => Error::at(&f.loc, format!("cannot read included file '{}': {io}", path.display())),
             Err(at) => at,
         })?;
+        self.includes.push(path.clone());
         let file = Arc::new(path);
         let doc = parse_xml(&text, &file)?;
         let root = doc.root_element();
@@ -578,6 +599,7 @@ mod tests {
             ids: HashMap::new(),
             include_depth: 0,
             read_vars: Default::default(),
+            includes: Vec::new(),
         };
         let file = Arc::new(p());
         let xml = parse_xml(&scene_text, &file).unwrap();

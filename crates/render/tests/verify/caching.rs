@@ -78,6 +78,10 @@ fn bad_strategies_are_clear_errors() {
     };
     let e = err("nodes:no_such_node", 1 << 20);
     assert!(e.contains("no_such_node") && e.contains("nodes:"), "{e}");
+    // A partial name suggests the nodes that contain it, and the list stays short (the marble
+    // scene has 75 nodes).
+    let e = err("nodes:turbulenc", 1 << 20);
+    assert!(e.contains("NG_marble/turbulence,") && e.contains("more)") && e.len() < 400, "{e}");
     let e = err("outputs", 0);
     assert!(e.contains("budget"), "{e}");
     let e = err("outputs", 100);

@@ -215,3 +215,64 @@ fn files_that_are_not_passes_are_refused() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// A scene lists every file it was built from, each once (what a render on another machine
+/// needs): includes, meshes, bitmaps, MaterialX documents with their includes, and the images
+/// their nodes read.
+#[test]
+fn scenes_list_every_file_they_read() {
+    let d = dir("files-list");
+    let refs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/refs/scenes");
+    std::fs::create_dir_all(d.join("parts")).unwrap();
+    std::fs::copy(refs.join("meshes/torus.obj"), d.join("parts/torus.obj")).unwrap();
+    std::fs::copy(refs.join("textures/uvgrid.png"), d.join("grid.png")).unwrap();
+    std::fs::copy(refs.join("textures/uvgrid.png"), d.join("parts/leaf.png")).unwrap();
+    std::fs::write(
+        d.join("parts/part.xml"),
+        "<scene version=\"3.0.0\">\n<shape type=\"obj\"><string name=\"filename\" value=\"parts/torus.obj\"/>\n\
+         <bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+         <string name=\"filename\" value=\"grid.png\"/></texture></bsdf></shape>\n</scene>\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("parts/leaf.mtlx"),
+        "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n<nodegraph name=\"NG\">\n\
+         <image name=\"img\" type=\"color3\"><input name=\"file\" type=\"filename\" value=\"leaf.png\"/></image>\n\
+         <output name=\"out\" type=\"color3\" nodename=\"img\"/>\n</nodegraph>\n</materialx>\n",
+    )
+    .unwrap();
+    std::fs::write(
+        d.join("top.mtlx"),
+        "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\" xmlns:xi=\"http://www.w3.org/2001/XInclude\">\n\
+         <xi:include href=\"parts/leaf.mtlx\"/>\n</materialx>\n",
+    )
+    .unwrap();
+    let main = d.join("main.xml");
+    std::fs::write(
+        &main,
+        "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><film type=\"hdrfilm\">\
+         <integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/></film></sensor>\n\
+         <include filename=\"parts/part.xml\"/>\n\
+         <shape type=\"sphere\"><bsdf type=\"diffuse\"><texture type=\"mtlx\" name=\"reflectance\">\
+         <string name=\"filename\" value=\"top.mtlx\"/><string name=\"output\" value=\"NG/out\"/></texture></bsdf></shape>\n\
+         <shape type=\"sphere\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+         <string name=\"filename\" value=\"grid.png\"/></texture></bsdf></shape>\n</scene>\n",
+    )
+    .unwrap();
+    let scene = render::loader::load_file(&main, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let canon = |p: &Path| p.canonicalize().unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let listed: Vec<PathBuf> = scene.files.iter().map(|p| canon(p)).collect();
+    let mut want: Vec<PathBuf> = ["main.xml", "parts/part.xml", "parts/torus.obj", "grid.png", "top.mtlx"]
+        .iter()
+        .chain(&["parts/leaf.mtlx", "parts/leaf.png"])
+        .map(|f| canon(&d.join(f)))
+        .collect();
+    assert_eq!(listed[0], want[0], "the scene file comes first");
+    let mut sorted = listed.clone();
+    sorted.sort();
+    sorted.dedup();
+    assert_eq!(sorted.len(), listed.len(), "each file once: {listed:?}");
+    want.sort();
+    assert_eq!(sorted, want);
+    std::fs::remove_dir_all(&d).unwrap();
+}
