@@ -117,6 +117,7 @@ def render(
     strategy: str = "auto",
     passes: int = 2,
     *,
+    strips: int = 1,
     defines: Optional[Dict[str, Any]] = None,
     budget_mb: Optional[float] = None,
     threads: Optional[int] = None,
@@ -127,8 +128,9 @@ def render(
     keep_passes: Optional[PathLike] = None,
     _fail_marker: Optional[str] = None,
 ) -> Tuple[np.ndarray, Dict[str, Any]]:
-    """Renders ``scene_path`` as ``passes`` Ray tasks of contiguous sample ranges and merges them:
-    bit for bit the image ``tessera.render`` makes in one process with the same plan.
+    """Renders ``scene_path`` as Ray tasks, ``passes`` contiguous sample ranges times ``strips``
+    horizontal bands of the image, and merges them: bit for bit the image ``tessera.render`` makes
+    in one process with the same plan.
 
     ``strategy="auto"`` profiles and plans once on the driver; other strategies are passed on.
     Each task takes ``num_cpus`` of Ray's CPUs and renders on ``threads`` threads (default: as
@@ -161,6 +163,14 @@ def render(
     shipment = _Shipment(ray, files, extra)
     task = ray.remote(num_cpus=num_cpus, max_retries=max_retries)(_render_pass)
     ranges = split_samples(spp, passes)
+    if not (1 <= strips <= scene.height):
+        raise ValueError(f"strips must be between 1 and the image height ({scene.height}), got {strips}")
+    rows = [scene.height * i // strips for i in range(strips + 1)]
+    parts = [
+        ((a, b), (0, y0, scene.width, y1), f"pass-{a}-{b}-rows-{y0}-{y1}.exr")
+        for (a, b) in ranges
+        for y0, y1 in zip(rows[:-1], rows[1:])
+    ]
     refs = [
         task.remote(
             shipment.manifest,
@@ -168,19 +178,18 @@ def render(
             shipment.key,
             shipment.relative(scene_path),
             defines,
-            dict(options, samples=r),
-            f"pass-{a}-{b}.exr",
+            dict(options, samples=r, crop=window if strips > 1 else None),
+            name,
             _fail_marker if i == 0 else None,
         )
-        for i, r in enumerate(ranges)
-        for (a, b) in [r]
+        for i, (r, window, name) in enumerate(parts)
     ]
     blobs = ray.get(refs)
     folder = Path(keep_passes) if keep_passes is not None else Path(tempfile.mkdtemp(prefix="tessera-passes-"))
     folder.mkdir(parents=True, exist_ok=True)
     paths = []
-    for (a, b), data in zip(ranges, blobs):
-        p = folder / f"pass-{a}-{b}.exr"
+    for (_, _, name), data in zip(parts, blobs):
+        p = folder / name
         p.write_bytes(data)
         paths.append(p)
     try:
@@ -192,6 +201,7 @@ def render(
             folder.rmdir()
     info = {
         "passes": ranges,
+        "windows": [w for _, w, _ in parts[:strips]],
         "plan": plan_json,
         "counts": counts,
         "files": {rel: digest for rel, digest in shipment.manifest.items()},

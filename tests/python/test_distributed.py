@@ -48,6 +48,12 @@ def test_distributed_render_equals_the_local_one(cluster, tmp_path):
     assert set(info["files"]) == {"marble.xml", "marble.mtlx"}
 
 
+def test_sample_passes_times_image_strips_equal_the_local_render(cluster):
+    image, info = td.render(MARBLE, spp=5, seed=2, strategy="outputs", passes=2, strips=3, defines={"res": 32})
+    assert info["windows"] == [(0, 0, 32, 10), (0, 10, 32, 21), (0, 21, 32, 32)]
+    assert same(image, local("outputs"))
+
+
 def test_auto_plans_once_and_every_pass_uses_the_plan(cluster, tmp_path):
     image, info = td.render(MARBLE, spp=4, seed=1, strategy="auto", passes=2, defines={"res": 32})
     plan = tmp_path / "plan.json"
