@@ -75,6 +75,57 @@ pub struct PassInfo {
 }
 
 impl PassInfo {
+    /// Reads and checks a pass file's description (its header only, no pixel).
+    pub fn read(path: &Path) -> Result<PassInfo> {
+        use exr::prelude::{AttributeValue, Text};
+        let not_a_pass = |why: String| {
+            Error::in_file(path, format!("not a tessera pass file ({why}); passes are written by `tessera render --samples A..B` or `--crop`"))
+        };
+        let meta = exr::meta::MetaData::read_from_file(path, false)
+            .map_err(|e| Error::in_file(path, format!("cannot read the EXR header: {e}")))?;
+        let header = meta.headers.first().ok_or_else(|| not_a_pass("no image in the file".into()))?;
+        let size = header.layer_size;
+        if size.area() as u64 > crate::loader::MAX_PIXELS {
+            return Err(Error::in_file(path, format!("{} × {} pixels is more than a pass can hold", size.0, size.1)));
+        }
+        let info_text = header
+            .shared_attributes
+            .other
+            .get(&Text::from(PASS_ATTRIBUTE))
+            .or_else(|| header.own_attributes.other.get(&Text::from(PASS_ATTRIBUTE)));
+        let info: PassInfo = match info_text {
+            Some(AttributeValue::Text(t)) => {
+                let text =
+                    std::str::from_utf8(t.as_slice()).map_err(|_| not_a_pass("its description is not UTF-8".into()))?;
+                serde_json::from_str(text).map_err(|e| not_a_pass(format!("its description does not parse: {e}")))?
+            }
+            _ => return Err(not_a_pass(format!("no `{PASS_ATTRIBUTE}` attribute"))),
+        };
+        if info.schema != PASS_SCHEMA {
+            return Err(not_a_pass(format!("schema '{}', expected '{PASS_SCHEMA}'", info.schema)));
+        }
+        let b = info.bucket();
+        let [s0, s1] = info.samples;
+        let (w, h) = (info.render.width, info.render.height);
+        if !(b.x0 < b.x1 && b.y0 < b.y1 && b.x1 <= w && b.y1 <= h && s0 < s1 && s1 <= info.render.spp) {
+            return Err(not_a_pass(format!(
+                "{} does not fit a {w} × {h} image of {} spp",
+                info.describe(),
+                info.render.spp
+            )));
+        }
+        if (size.0, size.1) != (b.width() as usize, b.height() as usize) {
+            return Err(not_a_pass(format!(
+                "its pixels are {} × {}, its window {} × {}",
+                size.0,
+                size.1,
+                b.width(),
+                b.height()
+            )));
+        }
+        Ok(info)
+    }
+
     fn bucket(&self) -> Bucket {
         let [x0, y0, x1, y1] = self.window;
         Bucket { x0, y0, x1, y1 }
@@ -162,52 +213,12 @@ impl Pass {
 
     /// Reads a pass file written by [`Pass::save`].
     pub fn load(path: &Path) -> Result<Pass> {
-        use exr::prelude::{read, AttributeValue, FlatSamples, ReadChannels, ReadLayers, Text};
+        use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
+        let info = PassInfo::read(path)?;
         let not_a_pass = |why: String| {
             Error::in_file(path, format!("not a tessera pass file ({why}); passes are written by `tessera render --samples A..B` or `--crop`"))
         };
-        let meta = exr::meta::MetaData::read_from_file(path, false)
-            .map_err(|e| Error::in_file(path, format!("cannot read the EXR header: {e}")))?;
-        let header = meta.headers.first().ok_or_else(|| not_a_pass("no image in the file".into()))?;
-        let size = header.layer_size;
-        if size.area() as u64 > crate::loader::MAX_PIXELS {
-            return Err(Error::in_file(path, format!("{} × {} pixels is more than a pass can hold", size.0, size.1)));
-        }
-        let info_text = header
-            .shared_attributes
-            .other
-            .get(&Text::from(PASS_ATTRIBUTE))
-            .or_else(|| header.own_attributes.other.get(&Text::from(PASS_ATTRIBUTE)));
-        let info: PassInfo = match info_text {
-            Some(AttributeValue::Text(t)) => {
-                let text =
-                    std::str::from_utf8(t.as_slice()).map_err(|_| not_a_pass("its description is not UTF-8".into()))?;
-                serde_json::from_str(text).map_err(|e| not_a_pass(format!("its description does not parse: {e}")))?
-            }
-            _ => return Err(not_a_pass(format!("no `{PASS_ATTRIBUTE}` attribute"))),
-        };
-        if info.schema != PASS_SCHEMA {
-            return Err(not_a_pass(format!("schema '{}', expected '{PASS_SCHEMA}'", info.schema)));
-        }
         let b = info.bucket();
-        let [s0, s1] = info.samples;
-        let (w, h) = (info.render.width, info.render.height);
-        if !(b.x0 < b.x1 && b.y0 < b.y1 && b.x1 <= w && b.y1 <= h && s0 < s1 && s1 <= info.render.spp) {
-            return Err(not_a_pass(format!(
-                "{} does not fit a {w} × {h} image of {} spp",
-                info.describe(),
-                info.render.spp
-            )));
-        }
-        if (size.0, size.1) != (b.width() as usize, b.height() as usize) {
-            return Err(not_a_pass(format!(
-                "its pixels are {} × {}, its window {} × {}",
-                size.0,
-                size.1,
-                b.width(),
-                b.height()
-            )));
-        }
         let image = read()
             .no_deep_data()
             .largest_resolution_level()
@@ -252,6 +263,9 @@ pub struct Merged {
     pub render: RenderIdentity,
 }
 
+/// Each window with the passes (indices) that cover it, sorted by their samples.
+type Windows = Vec<(Bucket, Vec<usize>)>;
+
 /// Merges passes that split one render into the render's image, bit for bit the image the
 /// render makes unsplit. Each pass comes with the file it was read from, for messages.
 ///
@@ -259,17 +273,64 @@ pub struct Merged {
 /// be equal or disjoint; the passes of each window must take every sample index `0..spp`
 /// exactly once; and the windows must cover the whole image.
 pub fn merge(passes: &[(PathBuf, Pass)]) -> Result<Merged> {
+    let infos: Vec<(PathBuf, &PassInfo)> = passes.iter().map(|(p, pass)| (p.clone(), &pass.info)).collect();
+    let (id, windows) = merge_plan(&infos)?;
+    sum_windows(id, &windows, |i| Ok(std::borrow::Cow::Borrowed(&passes[i].1)))
+}
+
+/// [`merge`] of pass files, reading them one at a time: their headers first (every check is
+/// made before any pixel is read), then each pass's sums, added to its window's and dropped,
+/// so that memory holds one window's sums and one pass, however many passes there are.
+pub fn merge_files(paths: &[PathBuf]) -> Result<Merged> {
+    let infos: Vec<PassInfo> = paths.iter().map(|p| PassInfo::read(p)).collect::<Result<_>>()?;
+    let named: Vec<(PathBuf, &PassInfo)> = paths.iter().cloned().zip(&infos).collect();
+    let (id, windows) = merge_plan(&named)?;
+    sum_windows(id, &windows, |i| {
+        let pass = Pass::load(&paths[i])?;
+        if pass.info != infos[i] {
+            return Err(Error::in_file(&paths[i], "changed while it was being merged"));
+        }
+        Ok(std::borrow::Cow::Owned(pass))
+    })
+}
+
+/// Adds up each window's passes (`pass(i)` gives pass `i`) and divides once.
+fn sum_windows<'a>(
+    id: &RenderIdentity,
+    windows: &Windows,
+    pass: impl Fn(usize) -> Result<std::borrow::Cow<'a, Pass>>,
+) -> Result<Merged> {
+    let mut image = Image::new(id.width, id.height);
+    let mut counts = Counts::default();
+    for (w, list) in windows {
+        let mut sums = vec![PixelSum::default(); w.len()];
+        for &i in list {
+            let p = pass(i)?;
+            for (s, o) in sums.iter_mut().zip(&p.sums) {
+                s.merge(o);
+            }
+            counts.add(&p.info.counts);
+        }
+        for ((x, y), s) in w.pixels().zip(&sums) {
+            image.pixels[(y * id.width + x) as usize] = s.mean(id.spp);
+        }
+    }
+    Ok(Merged { image, counts, render: id.clone() })
+}
+
+/// Checks that `passes` split one render (see [`merge`]); returns the render and its windows.
+fn merge_plan<'a>(passes: &'a [(PathBuf, &'a PassInfo)]) -> Result<(&'a RenderIdentity, Windows)> {
     let Some((first_path, first)) = passes.first() else {
         return Err(Error::plain("no passes to merge"));
     };
-    let id = &first.info.render;
+    let id = &first.render;
     for (i, (path, _)) in passes.iter().enumerate() {
         if passes[..i].iter().any(|(q, _)| q == path) {
             return Err(Error::in_file(path, "is given twice"));
         }
     }
     for (path, p) in &passes[1..] {
-        if let Some(field) = identity_difference(id, &p.info.render) {
+        if let Some(field) = identity_difference(id, &p.render) {
             return Err(Error::in_file(
                 path,
                 format!("a pass of another render than {}: {field}", first_path.display()),
@@ -279,7 +340,7 @@ pub fn merge(passes: &[(PathBuf, Pass)]) -> Result<Merged> {
     // Windows, each with its passes.
     let mut windows: Vec<(Bucket, Vec<usize>)> = Vec::new();
     for (i, (path, p)) in passes.iter().enumerate() {
-        let b = p.info.bucket();
+        let b = p.bucket();
         match windows.iter_mut().find(|(w, _)| overlaps(*w, b)) {
             Some((w, list)) if *w == b => list.push(i),
             Some((w, list)) => {
@@ -304,16 +365,16 @@ pub fn merge(passes: &[(PathBuf, Pass)]) -> Result<Merged> {
     }
     // Within a window, the sample ranges must tile 0..spp.
     for (w, list) in &mut windows {
-        list.sort_by_key(|&i| (passes[i].1.info.samples, i));
+        list.sort_by_key(|&i| (passes[i].1.samples, i));
         let mut next = 0u32;
         let mut previous: Option<usize> = None;
         for &i in list.iter() {
             let (path, p) = &passes[i];
-            let [s0, s1] = p.info.samples;
+            let [s0, s1] = p.samples;
             if s0 < next {
                 let prev = previous.map(|j| passes[j].0.display().to_string()).unwrap_or_default();
-                let what = if Some(p.info.samples) == previous.map(|j| passes[j].1.info.samples) {
-                    format!("duplicates {prev} ({})", p.info.describe())
+                let what = if Some(p.samples) == previous.map(|j| passes[j].1.samples) {
+                    format!("duplicates {prev} ({})", p.describe())
                 } else {
                     format!("its samples {s0}..{s1} overlap those of {prev}")
                 };
@@ -351,22 +412,7 @@ pub fn merge(passes: &[(PathBuf, Pass)]) -> Result<Merged> {
             id.width, id.height
         )));
     }
-    let mut image = Image::new(id.width, id.height);
-    let mut counts = Counts::default();
-    for (w, list) in &windows {
-        let mut sums = vec![PixelSum::default(); w.len()];
-        for &i in list {
-            let p = &passes[i].1;
-            for (s, o) in sums.iter_mut().zip(&p.sums) {
-                s.merge(o);
-            }
-            counts.add(&p.info.counts);
-        }
-        for ((x, y), s) in w.pixels().zip(&sums) {
-            image.pixels[(y * id.width + x) as usize] = s.mean(id.spp);
-        }
-    }
-    Ok(Merged { image, counts, render: id.clone() })
+    Ok((id, windows))
 }
 
 fn overlaps(a: Bucket, b: Bucket) -> bool {

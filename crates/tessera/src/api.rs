@@ -137,9 +137,5 @@ pub fn bake(document: &Path, options: &[String]) -> Result<(graph::BakedImage, V
 /// Merges pass files as `tessera merge` does: the image, the passes' summed counts and the
 /// render they were parts of.
 pub fn merge(passes: &[PathBuf]) -> Result<render::pass::Merged> {
-    let passes = passes
-        .iter()
-        .map(|p| Ok((p.clone(), render::pass::Pass::load(p)?)))
-        .collect::<Result<Vec<_>, render::error::Error>>()?;
-    Ok(render::pass::merge(&passes)?)
+    Ok(render::pass::merge_files(passes)?)
 }

@@ -4,7 +4,7 @@
 use render::caching::{render_cached, NodeCache, Strategy};
 use render::film::Image;
 use render::integrator::{Bucket, RenderSettings};
-use render::pass::{identity, merge, Pass};
+use render::pass::{identity, merge, merge_files, Pass};
 use render::scene::Scene;
 use std::path::{Path, PathBuf};
 
@@ -85,6 +85,9 @@ fn sample_passes_and_windows_merge_into_the_single_render_bit_for_bit() {
             .collect();
         let merged = merge(&passes).unwrap_or_else(|e| panic!("{k} passes: {e}"));
         assert!(bits(&merged.image) == bits(&single), "{k} sample passes differ from the single render");
+        // Read from the files one pass at a time: the same image.
+        let paths: Vec<PathBuf> = passes.iter().map(|(p, _)| p.clone()).collect();
+        assert!(bits(&merge_files(&paths).unwrap().image) == bits(&single), "{k} pass files merged");
         assert_eq!(merged.counts.samples, u64::from(w * h * SPP));
     }
     // Four windows of uneven sizes, then windows split into sample passes as well.
@@ -165,6 +168,11 @@ fn bad_merges_are_errors_naming_the_pass() {
     assert_mentions(&merge_error(&[a.clone(), b.clone(), copy]), &["copy-of-a.exr", "duplicates", "a.exr"]);
     assert_mentions(&merge_error(&[a.clone(), overlapping, b.clone()]), &["overlap.exr", "overlap", "a.exr"]);
     assert_eq!(merge_error(&[]), "no passes to merge");
+    // Files are checked (all headers) before any is summed.
+    let e = merge_files(&[a.0.clone(), d.join("missing.exr")]).unwrap_err().to_string();
+    assert!(e.contains("missing.exr"), "{e}");
+    let e = merge_files(&[a.0.clone(), a.0.clone()]).unwrap_err().to_string();
+    assert!(e.contains("given twice"), "{e}");
 
     // Parts of other renders: another seed, another sample count, another resolution, other
     // cached nodes, another scene.
