@@ -367,6 +367,18 @@ impl<'a> RenderJob<'a> {
                 bail!("{}: unsupported output format (expected .exr or .png)", o.display());
             }
         }
+        // Never overwrite what the render reads: an --out naming one of the scene's textures
+        // would destroy it (and change the next render).
+        let inputs: Vec<PathBuf> = scene.files.iter().filter_map(|f| f.canonicalize().ok()).collect();
+        for o in outputs.iter().chain(&args.stats_json) {
+            if let Some(input) = o.canonicalize().ok().filter(|c| inputs.contains(c)) {
+                bail!(
+                    "{}: is one of the scene's input files ({}); write the output elsewhere",
+                    o.display(),
+                    input.display()
+                );
+            }
+        }
 
         let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
         let pool =

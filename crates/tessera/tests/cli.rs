@@ -432,4 +432,27 @@ fn split_renders_merge_into_the_unsplit_image() {
     expect_failure(&["merge", "whole.exr", "--out", "x.exr"], &dir, &["whole.exr", "not a tessera pass file"]);
     expect_failure(&["merge", "p0.exr", "p1.exr", "--out", "p0.exr"], &dir, &["p0.exr", "one of the passes"]);
     assert!(!dir.join("x.exr").exists() && !dir.join("x.png").exists());
+
+    // An output that is one of the scene's inputs is refused, and the input is left intact.
+    let refs = refs_scene("textured_mesh.xml");
+    let scene_dir = dir.join("scene");
+    std::fs::create_dir_all(scene_dir.join("textures")).unwrap();
+    std::fs::create_dir_all(scene_dir.join("meshes")).unwrap();
+    for f in ["textured_mesh.xml", "textures/uvgrid.png", "meshes/torus.obj", "meshes/ribbon.obj"] {
+        std::fs::copy(refs.parent().unwrap().join(f), scene_dir.join(f)).unwrap();
+    }
+    let texture = scene_dir.join("textures/uvgrid.png");
+    let before = std::fs::read(&texture).unwrap();
+    let scene = scene_dir.join("textured_mesh.xml");
+    expect_failure(
+        &["render", scene.to_str().unwrap(), "--spp", "1", "--out", texture.to_str().unwrap()],
+        &dir,
+        &["uvgrid.png", "input files"],
+    );
+    expect_failure(
+        &["render", scene.to_str().unwrap(), "--spp", "1", "--out", "ok.exr", "--stats-json", scene.to_str().unwrap()],
+        &dir,
+        &["textured_mesh.xml", "input files"],
+    );
+    assert_eq!(std::fs::read(&texture).unwrap(), before);
 }
