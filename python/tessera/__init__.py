@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import operator
 import os
-from typing import Any, Dict, Iterable, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -46,6 +46,20 @@ def load(path: Optional[PathLike] = None, **defines: Any) -> Scene:
 
 def _flag(name: str) -> str:
     return "--" + name.replace("_", "-")
+
+
+_INTEGER_FLAGS = ("spp", "seed", "threads")
+
+
+def _flags(**values: Any) -> List[str]:
+    """``tessera render``'s flags for the keyword arguments that are not None (integers checked)."""
+    opts: List[str] = []
+    for name, value in values.items():
+        if name in _INTEGER_FLAGS:
+            value = _int(name, value)
+        if value is not None:
+            opts += [_flag(name), os.fspath(value) if isinstance(value, os.PathLike) else str(value)]
+    return opts
 
 
 def _int(name: str, value: Any) -> Optional[int]:
@@ -86,21 +100,18 @@ def render(
     Without ``out`` nothing is written (but ``stats_json`` and ``report`` when given).
     ``progress`` shows tessera's progress bar and summary on a terminal.
     """
-    opts = []
-    for name, value in [
-        ("spp", _int("spp", spp)),
-        ("seed", _int("seed", seed)),
-        ("budget_mb", budget_mb),
-        ("threads", _int("threads", threads)),
-        ("footprint", footprint),
-        ("filter_scale", filter_scale),
-        ("profile_share", profile_share),
-        ("out", out),
-        ("stats_json", stats_json),
-        ("report", report),
-    ]:
-        if value is not None:
-            opts += [_flag(name), os.fspath(value) if isinstance(value, os.PathLike) else str(value)]
+    opts = _flags(
+        spp=spp,
+        seed=seed,
+        budget_mb=budget_mb,
+        threads=threads,
+        footprint=footprint,
+        filter_scale=filter_scale,
+        profile_share=profile_share,
+        out=out,
+        stats_json=stats_json,
+        report=report,
+    )
     opts += ["--strategy", str(strategy)]
     if samples is not None:
         a, b = samples
@@ -131,18 +142,15 @@ def plan(
     """Profiles and plans as ``strategy="auto"`` does for a render with these settings; returns
     the plan file (``tessera.plan/1``) as JSON text. Written to a file, it is the strategy
     ``plan:FILE`` of renders that must cache the same nodes (sample passes, other machines)."""
-    opts = []
-    for name, value in [
-        ("spp", _int("spp", spp)),
-        ("seed", _int("seed", seed)),
-        ("budget_mb", budget_mb),
-        ("threads", _int("threads", threads)),
-        ("profile_share", profile_share),
-        ("footprint", footprint),
-        ("filter_scale", filter_scale),
-    ]:
-        if value is not None:
-            opts += [_flag(name), str(value)]
+    opts = _flags(
+        spp=spp,
+        seed=seed,
+        budget_mb=budget_mb,
+        threads=threads,
+        profile_share=profile_share,
+        footprint=footprint,
+        filter_scale=filter_scale,
+    )
     return scene.plan(opts + ["--quiet"])
 
 

@@ -94,7 +94,9 @@ def _materialise(manifest: Dict[str, str], blobs: Dict[str, Any], key: str) -> P
     return root
 
 
-def _render_pass(manifest, blobs, key, scene_rel, defines, options, out_name, fail_marker=None) -> bytes:
+def _render_part(manifest, blobs, key, scene_rel, defines, options, out_name, fail_marker=None) -> bytes:
+    """A Ray task: lays out the shipped files, renders with ``options`` (a pass, a window or a
+    whole frame) into ``out_name`` and returns the file's bytes."""
     if fail_marker is not None and not os.path.exists(fail_marker):
         # Testing hook: the first attempt dies mid-task, as a lost worker would.
         Path(fail_marker).write_text("died once\n")
@@ -161,7 +163,7 @@ def render(
     if not files:
         raise tessera.TesseraError("the embedded demo scene has no files to ship; give a scene file")
     shipment = _Shipment(ray, files, extra)
-    task = ray.remote(num_cpus=num_cpus, max_retries=max_retries)(_render_pass)
+    task = ray.remote(num_cpus=num_cpus, max_retries=max_retries)(_render_part)
     ranges = split_samples(spp, passes)
     if not (1 <= strips <= scene.height):
         raise ValueError(f"strips must be between 1 and the image height ({scene.height}), got {strips}")
@@ -209,15 +211,6 @@ def render(
     return image, info
 
 
-def _render_frame(manifest, blobs, key, scene_rel, defines, options, out_name) -> bytes:
-    root = _materialise(manifest, blobs, key)
-    scene = tessera.load(root / scene_rel, **defines)
-    with tempfile.TemporaryDirectory() as d:
-        out = Path(d) / out_name
-        tessera.render(scene, out=out, **options)
-        return out.read_bytes()
-
-
 def render_frames(
     scene_path: PathLike,
     frames: Sequence[int],
@@ -239,7 +232,7 @@ def render_frames(
     defines = {k: str(v) for k, v in (defines or {}).items()}
     first = tessera.load(scene_path, **dict(defines, **{frame_define: str(frames[0])}))
     shipment = _Shipment(ray, list(first.files), {})
-    task = ray.remote(num_cpus=num_cpus, max_retries=max_retries)(_render_frame)
+    task = ray.remote(num_cpus=num_cpus, max_retries=max_retries)(_render_part)
     options: Dict[str, Any] = {"strategy": strategy, "threads": max(1, int(num_cpus))}
     for name, value in [("spp", spp), ("seed", seed), ("budget_mb", budget_mb)]:
         if value is not None:
