@@ -228,3 +228,78 @@ fn bad_profiles_and_plans_are_rejected() {
     let model = Model::new(&profile, target).unwrap();
     assert!(plan::search(&model, SearchOptions::with_budget(f64::NAN)).is_err());
 }
+
+/// Profiles and plan files edited by hand or by other tools: numbers replaced by negative,
+/// huge, zero or fractional ones, and bytes dropped. Each loads with an error, or loads and is
+/// predicted and planned for (and read back as a plan) without a panic; cases are named by seed.
+#[test]
+fn mutated_profiles_and_plans_give_errors_not_panics() {
+    let scene = scene("marble.xml", 16);
+    let profile = take_profile(&scene, 1.0, 1);
+    let target = Target { samples: 1000, threads: 1 };
+    let plan_json = serde_json::to_string(&plan_file(&profile, &PlanSpec::outputs(&profile), target)).unwrap();
+    let json = profile.to_json();
+    let weird = ["-1", "0", "1e308", "-1e308", "0.5", "18446744073709551615", "4294967296", "1e-320", "255"];
+    for (doc, is_profile) in [(json, true), (plan_json, false)] {
+        // Where the numbers are.
+        let numbers: Vec<(usize, usize)> = {
+            let b = doc.as_bytes();
+            let mut v = Vec::new();
+            let mut i = 0;
+            while i < b.len() {
+                if b[i].is_ascii_digit() && (i == 0 || !b[i - 1].is_ascii_alphanumeric()) {
+                    let start = i;
+                    while i < b.len() && (b[i].is_ascii_digit() || b".eE+-".contains(&b[i])) {
+                        i += 1;
+                    }
+                    v.push((start, i));
+                }
+                i += 1;
+            }
+            v
+        };
+        let (mut accepted, mut refused) = (0, 0);
+        for seed in 0..400u64 {
+            let mut state = seed.wrapping_mul(0x2545_f491_4f6c_dd1d) | 1;
+            let mut next = |n: usize| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                (state % n as u64) as usize
+            };
+            let mut text = doc.clone();
+            for _ in 0..1 + next(3) {
+                let (a, b) = numbers[next(numbers.len())];
+                if b <= text.len() && text.is_char_boundary(a) && text.is_char_boundary(b) {
+                    text.replace_range(a..b, weird[next(weird.len())]);
+                }
+            }
+            if seed % 5 == 0 {
+                let at = next(text.len());
+                if text.is_char_boundary(at) && text.is_char_boundary((at + 1).min(text.len())) {
+                    text.replace_range(at..(at + 1).min(text.len()), "");
+                }
+            }
+            let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                if is_profile {
+                    let Ok(p) = Profile::from_json(&text) else { return false };
+                    if let Ok(model) = Model::new(&p, target) {
+                        let _ = model.predict(&PlanSpec::all(&p));
+                        let _ = plan::search(&model, SearchOptions::with_budget(1e6));
+                    }
+                    true
+                } else {
+                    let Ok(file) = PlanFile::from_json(&text) else { return false };
+                    let _ = NodeCache::from_plan(&scene, &file, 1 << 20);
+                    true
+                }
+            }));
+            match outcome {
+                Ok(true) => accepted += 1,
+                Ok(false) => refused += 1,
+                Err(_) => panic!("seed {seed}: a mutated {} panicked", if is_profile { "profile" } else { "plan" }),
+            }
+        }
+        assert!(refused > 0 && accepted > 0, "{accepted} accepted, {refused} refused");
+    }
+}
