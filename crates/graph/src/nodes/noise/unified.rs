@@ -1,14 +1,13 @@
 //! Unified noise.
 
 use super::cell::{cellnoise2d, cellnoise3d};
-use super::fractal::{fractal_sum, fractal_sum3};
+use super::fractal::fractal_sum;
 use super::lattice::{HashSel, Sel};
 use super::worley::{worley2d, worley3d, WorleyStats};
-use super::{coordinate, coordinate3, noise2d, noise3d, octave_count, to_uv, to_uv3, PatternStats};
+use super::{coordinate, coordinate3, moments2, noise2d, noise3d, octave_count, to_uv, to_uv3, PatternStats};
 use crate::moments::{add_scaled, affine, mix, mul};
 use crate::nodes::Ctx;
 use crate::value::{Filtered, Moments, Value, ValueType};
-use glam::{DVec2, DVec3};
 
 /// The angle (degrees) by which `unifiednoise2d` rotates its Perlin and cell lattices, and the
 /// z of its `fractal3d` slice, per unit of `jitter − 1`.
@@ -57,8 +56,8 @@ pub(super) fn unified2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], c
         3 => {
             let (p0, s0, j) = coordinate(&p);
             let sels = |f: f64| [HashSel::Slice((spin as f64 * f) as f32); 4];
-            let sum = fractal_sum(p0, s0, octaves, lac, dim, sels, &[DVec2::ZERO; 4], 1, ctx);
-            to_uv(&sum[0], &j)
+            let sum = fractal_sum(p0.to_array(), s0.to_array(), octaves, lac, dim, sels, &[[0.0; 2]; 4], 1, ctx);
+            to_uv(&moments2(&sum[0], crate::moments::sat), &j)
         }
         _ => Moments::default(),
     };
@@ -104,7 +103,17 @@ pub(super) fn unified3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ct
         2 => worley3d(stats, ValueType::Float, &[p, ins[3], ins[11]], ctx).ch[0],
         3 => {
             let (p0, s0, j) = coordinate3(&q);
-            let sum = fractal_sum3(p0, s0, octaves, lac, dim, &[Sel::Full], &[DVec3::ZERO], ctx);
+            let sum = fractal_sum(
+                p0.to_array(),
+                s0.to_array(),
+                octaves,
+                lac,
+                dim,
+                |_| [Sel::Full; 4],
+                &[[0.0; 3]; 4],
+                1,
+                ctx,
+            );
             to_uv3(&sum[0], &j)
         }
         _ => Moments::default(),
