@@ -1,9 +1,10 @@
 //! Worley noise.
 
+use super::lattice::{Dim, Lattice};
 use super::perlin::NoiseMoments;
 use super::{coordinate, coordinate3, to_uv, to_uv3, PatternStats};
 use crate::gaussian;
-use crate::nodes::hash::{cell3_float, cell3_vec3, cell_float, cell_vec3, ifloor};
+use crate::nodes::hash::ifloor;
 use crate::nodes::Ctx;
 use crate::value::{Filtered, Moments, ValueType};
 use glam::{DVec2, DVec3, Vec2, Vec3};
@@ -11,37 +12,96 @@ use glam::{DVec2, DVec3, Vec2, Vec3};
 /// Unfiltered MaterialX `mx_worley_noise_*(vec2)` (Euclidean metric): the `n` nearest
 /// distances (style 0) or the nearest feature's cell value(s) (style 1).
 pub fn worley_point(p: Vec2, jitter: f32, style: i32, n: usize) -> [f32; 3] {
-    let (x0, y0) = (ifloor(p.x), ifloor(p.y));
-    let local = Vec2::new(p.x - x0 as f32, p.y - y0 as f32);
-    let mut d = [1e6f32; 3];
-    let mut minpos = Vec2::ZERO;
-    for x in -1..=1 {
-        for y in -1..=1 {
-            let (cx, cy) = (x0.wrapping_add(x), y0.wrapping_add(y));
-            let off = Vec2::new(cell_vec3(cx, cy, 0), cell_vec3(cx, cy, 1));
-            let off = (off - 0.5) * jitter + 0.5;
-            let cell = Vec2::new(x as f32, y as f32) + off - local;
-            let dist = cell.dot(cell);
-            if dist < d[0] {
-                d[2] = d[1];
-                d[1] = d[0];
-                d[0] = dist;
-                minpos = cell;
-            } else if dist < d[1] {
-                d[2] = d[1];
-                d[1] = dist;
-            } else if dist < d[2] {
-                d[2] = dist;
+    worley(p.to_array(), jitter, style, n)
+}
+
+/// Unfiltered MaterialX `mx_worley_noise_*(vec3)` (Euclidean metric): the `n` nearest
+/// distances (style 0) or the nearest feature's cell value(s) (style 1).
+pub fn worley3_point(p: Vec3, jitter: f32, style: i32, n: usize) -> [f32; 3] {
+    worley(p.to_array(), jitter, style, n)
+}
+
+/// The 3^D cells around a cell, as offsets in −1..=1 per axis, visited in GLSL's nested order
+/// (the last axis fastest). Nested loops per dimension: one loop decoding the offsets from an
+/// index, or an odometer, measured 10–40 % slower than these.
+trait Neighbourhood<const D: usize>: Lattice<D> {
+    /// Calls `f` with each offset in order.
+    fn neighbours(f: impl FnMut([i32; D]));
+}
+
+impl Neighbourhood<2> for Dim<2> {
+    #[inline(always)]
+    fn neighbours(mut f: impl FnMut([i32; 2])) {
+        for x in -1..=1 {
+            for y in -1..=1 {
+                f([x, y]);
             }
         }
     }
+}
+
+impl Neighbourhood<3> for Dim<3> {
+    #[inline(always)]
+    fn neighbours(mut f: impl FnMut([i32; 3])) {
+        for x in -1..=1 {
+            for y in -1..=1 {
+                for z in -1..=1 {
+                    f([x, y, z]);
+                }
+            }
+        }
+    }
+}
+
+/// MaterialX Worley noise at `p` (f32, as GLSL computes it): the squared distances to the
+/// jittered feature points of the 3^D cells around `p`'s, visited in GLSL's nested order (the
+/// last axis fastest, which decides ties; [`Neighbourhood`]), the three nearest kept; then the distances, or the
+/// cell noise of the nearest feature's cell.
+#[inline(always)]
+fn worley<const D: usize>(p: [f32; D], jitter: f32, style: i32, n: usize) -> [f32; 3]
+where
+    Dim<D>: Neighbourhood<D>,
+{
+    let c0 = p.map(ifloor);
+    let mut local = p;
+    for (l, c) in local.iter_mut().zip(c0) {
+        *l -= c as f32;
+    }
+    let mut d = [1e6f32; 3];
+    let mut minpos = [0.0f32; D];
+    Dim::<D>::neighbours(|o| {
+        let mut c = c0;
+        for (c, o) in c.iter_mut().zip(o) {
+            *c = c.wrapping_add(o);
+        }
+        let mut cell = [0.0f32; D];
+        for (a, x) in cell.iter_mut().enumerate() {
+            let off = (Dim::<D>::cell(c, a, true) - 0.5) * jitter + 0.5;
+            *x = o[a] as f32 + off - local[a];
+        }
+        let dist = cell[1..].iter().fold(cell[0] * cell[0], |acc, x| acc + x * x);
+        if dist < d[0] {
+            d[2] = d[1];
+            d[1] = d[0];
+            d[0] = dist;
+            minpos = cell;
+        } else if dist < d[1] {
+            d[2] = d[1];
+            d[1] = dist;
+        } else if dist < d[2] {
+            d[2] = dist;
+        }
+    });
     if style == 1 {
-        let q = minpos + p;
-        let (ix, iy) = (ifloor(q.x), ifloor(q.y));
+        let mut q = minpos;
+        for (q, p) in q.iter_mut().zip(p) {
+            *q += p;
+        }
+        let c = q.map(ifloor);
         if n == 1 {
-            [cell_float(ix, iy), 0.0, 0.0]
+            [Dim::<D>::cell(c, 0, false), 0.0, 0.0]
         } else {
-            [cell_vec3(ix, iy, 0), cell_vec3(ix, iy, 1), cell_vec3(ix, iy, 2)]
+            [Dim::<D>::cell(c, 0, true), Dim::<D>::cell(c, 1, true), Dim::<D>::cell(c, 2, true)]
         }
     } else {
         [d[0].sqrt(), d[1].sqrt(), d[2].sqrt()]
@@ -124,48 +184,6 @@ pub(super) fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ct
         out.ch[k] = to_uv(&m, &j);
     }
     out
-}
-
-/// Unfiltered MaterialX `mx_worley_noise_*(vec3)` (Euclidean metric): the `n` nearest
-/// distances (style 0) or the nearest feature's cell value(s) (style 1).
-pub fn worley3_point(p: Vec3, jitter: f32, style: i32, n: usize) -> [f32; 3] {
-    let (x0, y0, z0) = (ifloor(p.x), ifloor(p.y), ifloor(p.z));
-    let local = Vec3::new(p.x - x0 as f32, p.y - y0 as f32, p.z - z0 as f32);
-    let mut d = [1e6f32; 3];
-    let mut minpos = Vec3::ZERO;
-    for x in -1..=1 {
-        for y in -1..=1 {
-            for z in -1..=1 {
-                let (cx, cy, cz) = (x0.wrapping_add(x), y0.wrapping_add(y), z0.wrapping_add(z));
-                let off = Vec3::new(cell3_vec3(cx, cy, cz, 0), cell3_vec3(cx, cy, cz, 1), cell3_vec3(cx, cy, cz, 2));
-                let off = (off - 0.5) * jitter + 0.5;
-                let cell = Vec3::new(x as f32, y as f32, z as f32) + off - local;
-                let dist = cell.dot(cell);
-                if dist < d[0] {
-                    d[2] = d[1];
-                    d[1] = d[0];
-                    d[0] = dist;
-                    minpos = cell;
-                } else if dist < d[1] {
-                    d[2] = d[1];
-                    d[1] = dist;
-                } else if dist < d[2] {
-                    d[2] = dist;
-                }
-            }
-        }
-    }
-    if style == 1 {
-        let q = minpos + p;
-        let (ix, iy, iz) = (ifloor(q.x), ifloor(q.y), ifloor(q.z));
-        if n == 1 {
-            [cell3_float(ix, iy, iz), 0.0, 0.0]
-        } else {
-            [cell3_vec3(ix, iy, iz, 0), cell3_vec3(ix, iy, iz, 1), cell3_vec3(ix, iy, iz, 2)]
-        }
-    } else {
-        [d[0].sqrt(), d[1].sqrt(), d[2].sqrt()]
-    }
 }
 
 /// Planes of the statistics table: `PLANES` bins of a lattice coordinate's fraction.
