@@ -122,6 +122,33 @@ pub(super) fn corner_sum<const D: usize, const N: usize, const TABLE: bool>(
             if TABLE { axis_terms(m, s, lo, hi, &mut axes[a]) } else { axis_terms_exact(m, s, lo, hi, &mut axes[a]) };
     }
     *out = [[0.0; 4]; 4];
+    // Float noise (one lattice) gets its own copy of the loops, without the loop over channels.
+    if sels.len() == 1 {
+        corner_products::<D, N>(&axes, &n, std::slice::from_ref(&sels[0]), out);
+    } else {
+        corner_products::<D, N>(&axes, &n, sels, out);
+    }
+    work.lattice += n.iter().product::<usize>() as u64;
+    for (o, sel) in out.iter_mut().zip(sels) {
+        let k = Dim::<D>::scale(*sel);
+        for v in o.iter_mut().take(D + 1) {
+            *v *= k;
+        }
+    }
+}
+
+/// [`corner_sum`]'s loops over the corners: the outer cells by odometer, the products over their
+/// axes once per cell, and the x loop adding each corner's hashed gradients times the axes'
+/// expectations into `out` (per lattice in `sels`).
+#[inline(always)]
+fn corner_products<const D: usize, const N: usize>(
+    axes: &[[(i32, AxisTerms); N]; D],
+    n: &[usize; D],
+    sels: &[<Dim<D> as Lattice<D>>::Sel],
+    out: &mut [[f64; 4]; 4],
+) where
+    Dim<D>: Lattice<D>,
+{
     // The outer cells in order, axis 1 fastest (an odometer over axes 1..D).
     let outer: usize = n[1..].iter().product();
     let mut at = [0usize; D];
@@ -166,13 +193,6 @@ pub(super) fn corner_sum<const D: usize, const N: usize, const TABLE: bool>(
                 break;
             }
             at[a] = 0;
-        }
-    }
-    work.lattice += n.iter().product::<usize>() as u64;
-    for (o, sel) in out.iter_mut().zip(sels) {
-        let k = Dim::<D>::scale(*sel);
-        for v in o.iter_mut().take(D + 1) {
-            *v *= k;
         }
     }
 }
