@@ -64,7 +64,7 @@ use fractal::{fractal_sum, octave_count};
 use glam::{DVec2, DVec3, Vec2};
 use lattice::{HashSel, Sel};
 use perlin::{perlin_octave, NoiseMoments};
-use unified::{unified2d, unified3d};
+use unified::unified;
 use worley::{worley2d, worley3_stats, worley3d, worley_stats, WorleyStats};
 
 #[cfg(test)]
@@ -375,7 +375,7 @@ pub(crate) fn eval(op: &NoiseOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
         NoiseOp::Fractal2d => fractal2d(ty, ins, ctx),
         NoiseOp::Cellnoise2d => cellnoise2d(ty, ins, ctx),
         NoiseOp::Worley2d(st) => worley2d(st, ty, ins, ctx),
-        NoiseOp::Unified2d(st) => unified2d(st, ty, ins, ctx),
+        NoiseOp::Unified2d(st) => unified::<2>(st, ty, ins, ctx),
     }
 }
 
@@ -385,6 +385,6 @@ pub(crate) fn eval3d(op: &Noise3dOp, ty: ValueType, ins: &[Filtered], ctx: &mut 
         Noise3dOp::Fractal3d => fractal3d(ty, ins, ctx),
         Noise3dOp::Cellnoise3d => cellnoise3d(ty, ins, ctx),
         Noise3dOp::Worley3d(st) => worley3d(st, ty, ins, ctx),
-        Noise3dOp::Unified3d(st) => unified3d(st, ty, ins, ctx),
+        Noise3dOp::Unified3d(st) => unified::<3>(st, ty, ins, ctx),
     }
 }
