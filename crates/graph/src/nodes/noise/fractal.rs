@@ -82,6 +82,7 @@ where
         let sel = sels(f);
         let alive = perlin_octave::<D>(p, s, &sel[..n], &offs_i[..n], &mut oct, ctx);
         for (acc, o) in acc.iter_mut().zip(&oct).take(n) {
+            let o = Dim::<D>::round(*o);
             acc.mean += a * o.mean;
             for (g, og) in acc.grad.iter_mut().zip(o.grad) {
                 *g += og * (a * f);

@@ -269,7 +269,7 @@ fn coordinate(t: &Filtered) -> (DVec2, DVec2, [Vec2; 2]) {
 }
 
 /// A 2D channel's noise-space moments as f32 moments, each field through `to_f32` (`as` for an
-/// octave's, which are f32 values already; [`crate::moments::sat`] for a fractal's sums).
+/// octave's, [`crate::moments::sat`] for a fractal's sums).
 #[inline]
 fn moments2(m: &NoiseMoments<2>, to_f32: impl Fn(f64) -> f32) -> Moments {
     Moments { mean: to_f32(m.mean), grad: Vec2::new(to_f32(m.grad[0]), to_f32(m.grad[1])), var: to_f32(m.var) }

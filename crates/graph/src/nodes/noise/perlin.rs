@@ -278,7 +278,8 @@ pub(super) trait PerlinOctave<const D: usize>: Lattice<D> {
     fn variance_model(sel: Self::Sel, s: [f64; D]) -> Self::VarianceModel;
     /// Variance within the footprint from the linearisation's `v_lin` and the model.
     fn footprint_variance(model: Self::VarianceModel, v_lin: f64) -> f64;
-    /// An octave's moments as the dimension hands them on (2D: each through f32).
+    /// An octave's moments as a fractal sums them (2D: each through f32, as the 2D octave
+    /// always handed them on; 3D: as they are).
     fn round(m: NoiseMoments<D>) -> NoiseMoments<D>;
 }
 
@@ -471,7 +472,7 @@ where
                 m.grad = Dim::<D>::point_gradient(q, *sel, ctx.work);
                 m.var = Dim::<D>::linear_variance(m.grad, s);
             }
-            out[k] = Dim::<D>::round(m);
+            out[k] = m;
         }
         ctx.work.lattice += 1 << D;
         return true;
@@ -480,7 +481,7 @@ where
     let damp = |s: f64| if s > sigma_e { (-kappa * (s * s - sigma_e * sigma_e)).exp() } else { 1.0 };
     let att = s[1..].iter().fold(damp(s[0]), |acc, &x| acc * damp(x));
     if att < OCTAVE_CUTOFF {
-        let cut = Dim::<D>::round(NoiseMoments { var: Dim::<D>::variance(sels[0]), ..NoiseMoments::default() });
+        let cut = NoiseMoments { var: Dim::<D>::variance(sels[0]), ..NoiseMoments::default() };
         for o in out.iter_mut() {
             *o = cut;
         }
@@ -506,7 +507,7 @@ where
             *g = r[k][1 + a] * att;
         }
         let var = Dim::<D>::footprint_variance(model, Dim::<D>::linear_variance(grad, s));
-        out[k] = Dim::<D>::round(NoiseMoments { mean: r[k][0] * att, grad, var });
+        out[k] = NoiseMoments { mean: r[k][0] * att, grad, var };
     }
     true
 }

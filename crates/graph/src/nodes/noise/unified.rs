@@ -57,20 +57,25 @@ impl UnifiedNoise<2> for Dim<2> {
     type Stats = PatternStats;
     const COORDINATE: ValueType = ValueType::Vector2;
     const FRACTAL_ROTATED: bool = false;
+    #[inline(always)]
     fn rotate(p: &Filtered, spin: f32, ctx: &Ctx) -> Filtered {
         let mut pr = *p;
         (pr.ch[0], pr.ch[1]) = crate::nodes::geometry::rotate(p.ch[0], p.ch[1], spin, ctx);
         pr
     }
+    #[inline(always)]
     fn perlin(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         noise2d(ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn cell(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         cellnoise2d(ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn worley(stats: &PatternStats, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         worley2d(stats, ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn fractal(p: &Filtered, spin: f32, octaves: i32, lac: f64, dim: f64, ctx: &mut Ctx) -> Moments {
         let (p0, s0, j) = coordinate(p);
         let sels = |f: f64| [HashSel::Slice((spin as f64 * f) as f32); 4];
@@ -83,6 +88,7 @@ impl UnifiedNoise<3> for Dim<3> {
     type Stats = WorleyStats;
     const COORDINATE: ValueType = ValueType::Vector3;
     const FRACTAL_ROTATED: bool = true;
+    #[inline(always)]
     fn rotate(p: &Filtered, spin: f32, ctx: &Ctx) -> Filtered {
         let mut q = *p;
         let m = crate::nodes::geometry::rotate3d_matrix(UNIFIED_AXIS, spin as f64);
@@ -93,15 +99,19 @@ impl UnifiedNoise<3> for Dim<3> {
         }
         q
     }
+    #[inline(always)]
     fn perlin(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         noise3d(ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn cell(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         cellnoise3d(ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn worley(stats: &WorleyStats, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
         worley3d(stats, ValueType::Float, ins, ctx)
     }
+    #[inline(always)]
     fn fractal(q: &Filtered, _: f32, octaves: i32, lac: f64, dim: f64, ctx: &mut Ctx) -> Moments {
         let (p0, s0, j) = coordinate3(q);
         let sels = |_| [Sel::Full; 4];
