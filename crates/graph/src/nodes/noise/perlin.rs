@@ -437,6 +437,10 @@ fn exact_sum<const D: usize>(
 /// at spreads clamped to σₑ, times a fitted Gaussian damping `exp(−κ (σ² − σₑ²))` per axis
 /// beyond σₑ; the variance within the footprint follows the dimension's model
 /// ([`PerlinOctave`]).
+///
+/// Inlined into its callers (noise nodes and fractal sums): out of line, the 2D float noise node
+/// measured 3–4 % slower than its own copy of the octave had been.
+#[inline]
 pub(super) fn perlin_octave<const D: usize>(
     p: [f64; D],
     s: [f64; D],
