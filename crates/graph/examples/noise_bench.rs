@@ -8,6 +8,8 @@
 //! Each row is the fastest of `ROUNDS` (default 7) timed rounds over 64 footprint centres; the
 //! coordinate is `texcoord × 8` (2D) or the position of an oblique surface × 4 (3D), so every
 //! lattice axis spreads under a filtered footprint.
+//! `NOISE_BENCH_ONLY=TEXT` times only the rows whose name contains `TEXT` (e.g. `fractal3d`),
+//! so that a suspect row can be rerun many times or profiled on its own.
 
 use glam::{Mat2, Vec2, Vec3};
 use graph::{Document, EvalScratch, Footprint, Geometry, LoadOptions};
@@ -44,11 +46,15 @@ fn oblique(uv: Vec2) -> Geometry {
 
 fn main() {
     let rounds: usize = std::env::args().nth(1).and_then(|a| a.parse().ok()).unwrap_or(7);
+    let only = std::env::var("NOISE_BENCH_ONLY").unwrap_or_default();
     let uvs: Vec<Vec2> = (0..64).map(|i| Vec2::new((i as f32 * 0.618034) % 1.0, (i as f32 * 0.754878) % 1.0)).collect();
     println!("| node | σ (uv) | ns / eval |");
     println!("|---|---:|---:|");
     for dim in [2, 3] {
         for &(row, category, ty, body) in NODES {
+            if !format!("{category}{dim}d {row}").contains(&only) {
+                continue;
+            }
             let (vty, src, name, scale) = if dim == 2 {
                 ("vector2", "texcoord", "texcoord", "8, 8")
             } else {

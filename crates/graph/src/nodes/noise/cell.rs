@@ -1,13 +1,13 @@
 //! Cell noise: the hash of the lattice cell, filtered by the footprint's mass over each cell.
 
 use super::lattice::{Dim, Lattice};
-use super::perlin::M3;
+use super::perlin::NoiseMoments;
 use super::{coordinate, coordinate3, to_uv, to_uv3};
 use crate::gaussian;
 use crate::nodes::hash::ifloor;
 use crate::nodes::Ctx;
 use crate::value::{Filtered, Moments, ValueType};
-use glam::{DVec3, Vec2};
+use glam::Vec2;
 
 /// Per-axis spread (cells) up to which cell noise is filtered exactly.
 pub const CELL_SIGMA_EXACT: f64 = 0.5;
@@ -24,7 +24,7 @@ pub(super) fn cellnoise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Fil
 
 pub(super) fn cellnoise3d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let (p, s, j) = coordinate3(&ins[0]);
-    let finish = |mean: f64, g: [f64; 3], var: f64| to_uv3(&M3 { mean, grad: DVec3::from_array(g), var }, &j);
+    let finish = |mean: f64, g: [f64; 3], var: f64| to_uv3(&NoiseMoments { mean, grad: g, var }, &j);
     cellnoise(ty, p.to_array(), s.to_array(), finish, ctx)
 }
 

@@ -60,11 +60,11 @@ use crate::graph::{GeomProp, Source};
 use crate::moments::mul;
 use crate::value::{Filtered, Moments, ValueType};
 use cell::{cellnoise2d, cellnoise3d};
-use fractal::{fractal_sum, fractal_sum3, octave_count};
+use fractal::{fractal_sum, octave_count};
 use glam::{DVec2, DVec3, Vec2};
 use lattice::{HashSel, Sel};
-use perlin::{perlin3_octave, perlin_octave, M3};
-use unified::{unified2d, unified3d};
+use perlin::{perlin_octave, NoiseMoments};
+use unified::unified;
 use worley::{worley2d, worley3_stats, worley3d, worley_stats, WorleyStats};
 
 #[cfg(test)]
@@ -248,9 +248,9 @@ fn build3d(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], _: &
 }
 
 /// Hash selections and coordinate offsets per output channel.
-fn channel_layout(ty: ValueType, fractal: bool) -> ([HashSel; 4], [DVec2; 4], usize) {
-    let off = if fractal { DVec2::new(19.0, 193.0) } else { DVec2::new(19.0, 73.0) };
-    let z = DVec2::ZERO;
+fn channel_layout(ty: ValueType, fractal: bool) -> ([HashSel; 4], [[f64; 2]; 4], usize) {
+    let off = if fractal { [19.0, 193.0] } else { [19.0, 73.0] };
+    let z = [0.0; 2];
     let b = |k| HashSel::Byte(k);
     match ty.channels() {
         1 => ([HashSel::Full; 4], [z; 4], 1),
@@ -268,6 +268,13 @@ fn coordinate(t: &Filtered) -> (DVec2, DVec2, [Vec2; 2]) {
     (p, s, [t.ch[0].grad, t.ch[1].grad])
 }
 
+/// A 2D channel's noise-space moments as f32 moments, each field through `to_f32` (`as` for an
+/// octave's, [`crate::moments::sat`] for a fractal's sums).
+#[inline]
+fn moments2(m: &NoiseMoments<2>, to_f32: impl Fn(f64) -> f32) -> Moments {
+    Moments { mean: to_f32(m.mean), grad: Vec2::new(to_f32(m.grad[0]), to_f32(m.grad[1])), var: to_f32(m.var) }
+}
+
 /// Maps a noise-space gradient to a uv gradient.
 #[inline]
 fn to_uv(m: &Moments, j: &[Vec2; 2]) -> Moments {
@@ -280,11 +287,11 @@ fn noise2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let (amp, pivot, t) = (&ins[0], ins[1].ch[0], &ins[2]);
     let (p, s, j) = coordinate(t);
     let (sels, offs, n) = channel_layout(ty, false);
-    let mut oct = [Moments::default(); 4];
-    perlin_octave(p, s, &sels[..n], &offs[..n], &mut oct, ctx);
+    let mut oct = [NoiseMoments::default(); 4];
+    perlin_octave(p.to_array(), s.to_array(), &sels[..n], &offs[..n], &mut oct, ctx);
     let mut out = Filtered::zero(ty);
     for k in 0..n {
-        let v = mul(to_uv(&oct[k], &j), amp.at(k), ctx.fp);
+        let v = mul(to_uv(&moments2(&oct[k], |x| x as f32), &j), amp.at(k), ctx.fp);
         out.ch[k] = Moments { mean: v.mean + pivot.mean, grad: v.grad + pivot.grad, var: v.var + pivot.var };
     }
     out
@@ -297,18 +304,18 @@ fn fractal2d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let dim = ins[3].ch[0].mean as f64;
     let (p0, s0, j) = coordinate(&ins[4]);
     let (sels, offs, n) = channel_layout(ty, true);
-    let sum = fractal_sum(p0, s0, octaves, lac, dim, |_| sels, &offs, n, ctx);
+    let sum = fractal_sum(p0.to_array(), s0.to_array(), octaves, lac, dim, |_| sels, &offs, n, ctx);
     let mut out = Filtered::zero(ty);
     for k in 0..n {
-        out.ch[k] = mul(to_uv(&sum[k], &j), amp.at(k), ctx.fp);
+        out.ch[k] = mul(to_uv(&moments2(&sum[k], crate::moments::sat), &j), amp.at(k), ctx.fp);
     }
     out
 }
 
 /// Lattices and coordinate offsets per output channel.
-fn channel_layout3(ty: ValueType, fractal: bool) -> ([Sel; 4], [DVec3; 4], usize) {
-    let off = if fractal { DVec3::new(19.0, 193.0, 17.0) } else { DVec3::new(19.0, 73.0, 29.0) };
-    let z = DVec3::ZERO;
+fn channel_layout3(ty: ValueType, fractal: bool) -> ([Sel; 4], [[f64; 3]; 4], usize) {
+    let off = if fractal { [19.0, 193.0, 17.0] } else { [19.0, 73.0, 29.0] };
+    let z = [0.0; 3];
     let b = Sel::Byte;
     match ty.channels() {
         1 => ([Sel::Full; 4], [z; 4], 1),
@@ -328,9 +335,9 @@ fn coordinate3(t: &Filtered) -> (DVec3, DVec3, [Vec2; 3]) {
 
 /// Maps noise-space moments to uv moments (the gradient through the coordinate's Jacobian).
 #[inline]
-fn to_uv3(m: &M3, j: &[Vec2; 3]) -> Moments {
+fn to_uv3(m: &NoiseMoments<3>, j: &[Vec2; 3]) -> Moments {
     use crate::moments::{add_grad, sat, scale_grad};
-    let g = add_grad(add_grad(scale_grad(j[0], m.grad.x), scale_grad(j[1], m.grad.y)), scale_grad(j[2], m.grad.z));
+    let g = add_grad(add_grad(scale_grad(j[0], m.grad[0]), scale_grad(j[1], m.grad[1])), scale_grad(j[2], m.grad[2]));
     Moments { mean: sat(m.mean), grad: g, var: sat(m.var) }
 }
 
@@ -338,8 +345,8 @@ fn noise3d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let (amp, pivot) = (&ins[0], ins[1].ch[0]);
     let (p, s, j) = coordinate3(&ins[2]);
     let (sels, offs, n) = channel_layout3(ty, false);
-    let mut oct = [M3::default(); 4];
-    perlin3_octave(p, s, &sels[..n], &offs[..n], &mut oct, ctx);
+    let mut oct = [NoiseMoments::default(); 4];
+    perlin_octave(p.to_array(), s.to_array(), &sels[..n], &offs[..n], &mut oct, ctx);
     let mut out = Filtered::zero(ty);
     for k in 0..n {
         let v = mul(to_uv3(&oct[k], &j), amp.at(k), ctx.fp);
@@ -354,7 +361,7 @@ fn fractal3d(ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let (lac, dim) = (ins[2].ch[0].mean as f64, ins[3].ch[0].mean as f64);
     let (p, s, j) = coordinate3(&ins[4]);
     let (sels, offs, n) = channel_layout3(ty, true);
-    let sum = fractal_sum3(p, s, octaves, lac, dim, &sels[..n], &offs[..n], ctx);
+    let sum = fractal_sum(p.to_array(), s.to_array(), octaves, lac, dim, |_| sels, &offs, n, ctx);
     let mut out = Filtered::zero(ty);
     for k in 0..n {
         out.ch[k] = mul(to_uv3(&sum[k], &j), amp.at(k), ctx.fp);
@@ -368,7 +375,7 @@ pub(crate) fn eval(op: &NoiseOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
         NoiseOp::Fractal2d => fractal2d(ty, ins, ctx),
         NoiseOp::Cellnoise2d => cellnoise2d(ty, ins, ctx),
         NoiseOp::Worley2d(st) => worley2d(st, ty, ins, ctx),
-        NoiseOp::Unified2d(st) => unified2d(st, ty, ins, ctx),
+        NoiseOp::Unified2d(st) => unified::<2>(st, ty, ins, ctx),
     }
 }
 
@@ -378,6 +385,6 @@ pub(crate) fn eval3d(op: &Noise3dOp, ty: ValueType, ins: &[Filtered], ctx: &mut 
         Noise3dOp::Fractal3d => fractal3d(ty, ins, ctx),
         Noise3dOp::Cellnoise3d => cellnoise3d(ty, ins, ctx),
         Noise3dOp::Worley3d(st) => worley3d(st, ty, ins, ctx),
-        Noise3dOp::Unified3d(st) => unified3d(st, ty, ins, ctx),
+        Noise3dOp::Unified3d(st) => unified::<3>(st, ty, ins, ctx),
     }
 }

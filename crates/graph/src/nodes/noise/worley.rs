@@ -1,6 +1,6 @@
 //! Worley noise.
 
-use super::perlin::M3;
+use super::perlin::NoiseMoments;
 use super::{coordinate, coordinate3, to_uv, to_uv3, PatternStats};
 use crate::gaussian;
 use crate::nodes::hash::{cell3_float, cell3_vec3, cell_float, cell_vec3, ifloor};
@@ -321,9 +321,9 @@ pub(super) fn worley3d(stats: &WorleyStats, ty: ValueType, ins: &[Filtered], ctx
             if s.y > 0.0 { ez[k].y / s.y } else { 0.0 },
             if s.z > 0.0 { ez[k].z / s.z } else { 0.0 },
         );
-        let m = M3 {
+        let m = NoiseMoments {
             mean: wl * e[k] + w_global * gmean[k] as f64,
-            grad: g * wl,
+            grad: (g * wl).to_array(),
             var: wl * var + w_global * gvar[k] as f64,
         };
         out.ch[k] = to_uv3(&m, &j);
