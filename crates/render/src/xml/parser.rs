@@ -13,6 +13,11 @@ use crate::error::{Error, Loc, Result};
 /// Deepest `<include>` nesting accepted (guards against recursive includes).
 const MAX_INCLUDE_DEPTH: usize = 16;
 
+/// Deepest nesting of objects accepted, includes counted in (a scene nests a few: a shape's
+/// two-sided BSDF's blended BSDF's texture). Objects are built recursively: without a limit, a
+/// scene nesting 100 000 shapes overflowed the stack.
+pub const MAX_OBJECT_DEPTH: usize = 64;
+
 /// Parses the scene file at `path`. `defines` are `-D name=value` pairs from the command line:
 /// they override the scene's `<default>`s.
 pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
@@ -55,6 +60,7 @@ pub(crate) fn parse_with_includes(
         include_depth: 0,
         read_vars: Default::default(),
         includes: Vec::new(),
+        object_depth: 0,
     };
     let file = Arc::new(virtual_path.to_path_buf());
     let doc = parse_xml(text, &file)?;
@@ -289,6 +295,8 @@ pub(super) struct Parser {
     read_vars: std::cell::RefCell<std::collections::HashSet<String>>,
     /// The files `<include>`s read.
     includes: Vec<PathBuf>,
+    /// How many objects enclose the one being built.
+    object_depth: usize,
 }
 
 impl Parser {
@@ -355,6 +363,19 @@ impl Parser {
     }
 
     fn build_object(&mut self, src: &Src, node: roxmltree::Node, tag: &str) -> Result<Rc<Object>> {
+        if self.object_depth >= MAX_OBJECT_DEPTH {
+            return Err(Error::at(
+                &src.loc(node.range().start),
+                format!("<{tag}> is nested more than {MAX_OBJECT_DEPTH} objects deep"),
+            ));
+        }
+        self.object_depth += 1;
+        let result = self.build_object_at_depth(src, node, tag);
+        self.object_depth -= 1;
+        result
+    }
+
+    fn build_object_at_depth(&mut self, src: &Src, node: roxmltree::Node, tag: &str) -> Result<Rc<Object>> {
         let e = self.elem(src, node)?;
         let (plugin, id, name) = if tag == "scene" {
             e.allow(&["version"])?;
@@ -600,6 +621,7 @@ mod tests {
             include_depth: 0,
             read_vars: Default::default(),
             includes: Vec::new(),
+            object_depth: 0,
         };
         let file = Arc::new(p());
         let xml = parse_xml(&scene_text, &file).unwrap();

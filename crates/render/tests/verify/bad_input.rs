@@ -378,3 +378,31 @@ fn mutated_inputs_give_errors_not_panics() {
     }
     std::fs::remove_dir_all(&d).unwrap();
 }
+
+/// Objects nested absurdly deep (100 000 shapes inside each other) are an error at the element
+/// that goes beyond the limit, not a stack overflow; a realistic depth loads.
+#[test]
+fn deeply_nested_objects_are_refused() {
+    let d = dir();
+    let deep = d.join("deep.xml");
+    let n = 100_000;
+    std::fs::write(
+        &deep,
+        format!("<scene version=\"3.0.0\">\n{}{}</scene>\n", "<shape type=\"sphere\">".repeat(n), "</shape>".repeat(n)),
+    )
+    .unwrap();
+    let e = render::loader::load_file(&deep, &[]).err().expect("too deep").to_string();
+    let limit = render::xml::MAX_OBJECT_DEPTH;
+    assert!(e.contains("deep.xml:2:") && e.contains(&format!("more than {limit} objects deep")), "{e}");
+    // A BSDF nested a few levels down (twosided of blendbsdf of diffuse) is far from the limit.
+    let ok = d.join("nested_ok.xml");
+    std::fs::write(
+        &ok,
+        format!(
+            "<scene version=\"3.0.0\">\n{SENSOR}\n<shape type=\"sphere\"><bsdf type=\"twosided\"><bsdf type=\"diffuse\">\
+             <texture type=\"checkerboard\" name=\"reflectance\"/></bsdf></bsdf></shape>\n</scene>\n"
+        ),
+    )
+    .unwrap();
+    render::loader::load_file(&ok, &[]).unwrap_or_else(|e| panic!("{e}"));
+}
