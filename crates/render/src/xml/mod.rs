@@ -20,7 +20,7 @@ mod parser;
 mod transform;
 
 pub use object::{Object, Param, Value};
-pub use parser::{parse_file, parse_str, MAX_OBJECT_DEPTH};
+pub use parser::{parse_file, parse_str, MAX_OBJECT_DEPTH, MAX_SUBSTITUTED_BYTES};
 pub(crate) use parser::{parse_file_with_includes, parse_with_includes};
 
 /// At most this many characters of a value from the scene go into a message.

@@ -18,6 +18,11 @@ const MAX_INCLUDE_DEPTH: usize = 16;
 /// scene nesting 100 000 shapes overflowed the stack.
 pub const MAX_OBJECT_DEPTH: usize = 64;
 
+/// The longest a value may grow by `$name` substitution. A default may read earlier defaults, so
+/// nine defaults each repeating the previous ten times made a value of 10¹⁰ bytes (15 GB in 20 s
+/// before it was stopped); no real value comes near a mebibyte.
+pub const MAX_SUBSTITUTED_BYTES: usize = 1 << 20;
+
 /// Parses the scene file at `path`. `defines` are `-D name=value` pairs from the command line:
 /// they override the scene's `<default>`s.
 pub fn parse_file(path: &Path, defines: &[(String, String)]) -> Result<Rc<Object>> {
@@ -326,6 +331,16 @@ impl Parser {
                 ));
             }
             match self.variable(name) {
+                Some(v) if out.len() + v.len() > MAX_SUBSTITUTED_BYTES => {
+                    return Err(Error::at(
+                        loc,
+                        format!(
+                            "\"{}\" grows beyond {} MiB as its variables are substituted (defaults that repeat each other?)",
+                            super::excerpt(s),
+                            MAX_SUBSTITUTED_BYTES >> 20
+                        ),
+                    ));
+                }
                 Some(v) => out.push_str(v),
                 None => {
                     return Err(Error::at(

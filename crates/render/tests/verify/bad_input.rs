@@ -406,3 +406,19 @@ fn deeply_nested_objects_are_refused() {
     .unwrap();
     render::loader::load_file(&ok, &[]).unwrap_or_else(|e| panic!("{e}"));
 }
+
+/// Defaults that repeat each other (nine levels of ten: a 10¹⁰-byte value, the XML "billion
+/// laughs") are an error at the first that grows past the limit (before, the load took 15 GB
+/// and had not finished after 20 s).
+#[test]
+fn defaults_that_multiply_are_refused() {
+    let mut text = String::from("<scene version=\"3.0.0\">\n<default name=\"v0\" value=\"xxxxxxxxxx\"/>\n");
+    for i in 1..10 {
+        text += &format!("<default name=\"v{i}\" value=\"{}\"/>\n", format!("$v{}", i - 1).repeat(10));
+    }
+    text += "<shape type=\"sphere\"><string name=\"x\" value=\"$v9\"/></shape>\n</scene>\n";
+    let path = dir().join("laughs.xml");
+    std::fs::write(&path, text).unwrap();
+    let e = render::loader::load_file(&path, &[]).err().expect("a value of 10 GB").to_string();
+    assert!(e.contains("laughs.xml:8:") && e.contains("grows beyond 1 MiB"), "{e}");
+}
