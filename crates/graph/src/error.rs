@@ -48,6 +48,12 @@ pub enum BuildError {
     /// Two nodes or outputs with one name.
     #[error("duplicate name `{0}`")]
     DuplicateName(String),
+    /// The graph grew beyond [`crate::MAX_NODES`] (typically node graphs that instantiate each
+    /// other many times over).
+    #[error(
+        "more than {0} nodes once node graphs are instantiated (node graphs that use each other many times over?)"
+    )]
+    TooManyNodes(usize),
     /// A node-specific rule failed.
     #[error("node `{node}`: {message}")]
     Invalid {

@@ -242,6 +242,9 @@ impl GraphBuilder {
         inputs: &[(&str, Source)],
         params: Vec<Param>,
     ) -> Result<NodeId, BuildError> {
+        if self.by_name.len() >= crate::MAX_NODES {
+            return Err(BuildError::TooManyNodes(crate::MAX_NODES));
+        }
         if self.by_name.contains_key(name) {
             return Err(BuildError::DuplicateName(name.to_string()));
         }

@@ -82,6 +82,12 @@ pub mod nodes;
 pub mod text;
 pub mod value;
 
+/// The most nodes a graph may have, after node graphs used as node implementations are
+/// instantiated: far above any real graph (the demo graphs have tens to hundreds), and a few
+/// tens of megabytes at most. Eight levels of node graphs each using the previous ten times made 10⁸
+/// nodes (5 GB, more than 30 s) before there was a limit.
+pub const MAX_NODES: usize = 1 << 16;
+
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 pub use eval::{

@@ -97,3 +97,48 @@ fn malformed_xml_names_line() {
     assert!(e.location.line >= 5, "{e}");
     assert!(matches!(e.kind, LoadErrorKind::Xml(_)));
 }
+
+/// Node graphs that implement nodes by using the previous level ten times, eight levels deep,
+/// would flatten to 10⁸ nodes: an error naming the document and where, once the graph passes
+/// `graph::MAX_NODES`, instead of gigabytes and minutes. Three levels (a thousand) load.
+#[test]
+fn node_graphs_multiplying_each_other_are_refused() {
+    let doc = |levels: usize| {
+        let mut s = String::from(
+            "<nodedef name=\"ND_l0\" node=\"l0\"><output name=\"out\" type=\"float\"/></nodedef>\n\
+             <nodegraph name=\"NG_l0\" nodedef=\"ND_l0\"><constant name=\"c\" type=\"float\">\
+             <input name=\"value\" type=\"float\" value=\"1\"/></constant>\
+             <output name=\"out\" type=\"float\" nodename=\"c\"/></nodegraph>\n",
+        );
+        for l in 1..=levels {
+            s += &format!("<nodedef name=\"ND_l{l}\" node=\"l{l}\"><output name=\"out\" type=\"float\"/></nodedef>\n");
+            s += &format!("<nodegraph name=\"NG_l{l}\" nodedef=\"ND_l{l}\">");
+            for k in 0..10 {
+                s += &format!("<l{} name=\"a{k}\" type=\"float\"/>", l - 1);
+            }
+            let mut prev = "a0".to_string();
+            for k in 1..10 {
+                s += &format!(
+                    "<add name=\"s{k}\" type=\"float\"><input name=\"in1\" type=\"float\" nodename=\"{prev}\"/>\
+                     <input name=\"in2\" type=\"float\" nodename=\"a{k}\"/></add>"
+                );
+                prev = format!("s{k}");
+            }
+            s += &format!("<output name=\"out\" type=\"float\" nodename=\"{prev}\"/></nodegraph>\n");
+        }
+        s + &format!(
+            "<nodegraph name=\"NG\"><l{levels} name=\"top\" type=\"float\"/>\
+             <output name=\"out\" type=\"float\" nodename=\"top\"/></nodegraph>"
+        )
+    };
+    let (p, e) = load("multiply.mtlx", &doc(8));
+    assert_eq!(e.location.file, p);
+    assert!(e.location.line > 0, "{e}");
+    assert!(e.to_string().contains(&format!("more than {} nodes", graph::MAX_NODES)), "{e}");
+    let dir = std::env::temp_dir().join(format!("graph-errors-{}", std::process::id()));
+    let ok = dir.join("thousand.mtlx");
+    std::fs::write(&ok, format!("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n{}\n</materialx>\n", doc(3)))
+        .unwrap();
+    let d = Document::load(&ok).unwrap_or_else(|e| panic!("{e}"));
+    assert!(d.graph().node_count() > 1000, "{}", d.graph().node_count());
+}
