@@ -150,9 +150,31 @@ pub fn write_through_temp(path: &Path, write: impl FnOnce(&Path) -> Result<()>) 
     })
 }
 
+/// The longest file name most file systems take (NAME_MAX), in bytes.
+pub const MAX_FILE_NAME_BYTES: usize = 255;
+
+/// The temporary file beside `path`: its name, cut short enough that the temporary name itself
+/// is a legal file name whenever `path`'s is, then the process id.
 fn temp_path(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    path.with_file_name(format!(".{name}.{}.tmp", std::process::id()))
+    let mut cut = name.len().min(MAX_FILE_NAME_BYTES - 32);
+    while !name.is_char_boundary(cut) {
+        cut -= 1;
+    }
+    path.with_file_name(format!(".{}.{}.tmp", &name[..cut], std::process::id()))
+}
+
+/// Checks that an output's file name is not longer than file systems take, before any work is
+/// done for it.
+pub fn check_file_name(path: &Path) -> Result<()> {
+    let len = path.file_name().map_or(0, |n| n.len());
+    if len > MAX_FILE_NAME_BYTES {
+        return Err(Error::in_file(
+            path,
+            format!("the file name is {len} bytes long; file systems take at most {MAX_FILE_NAME_BYTES}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Relative mean squared error of `a` against `reference`: mean over pixels and channels of

@@ -367,6 +367,9 @@ impl<'a> RenderJob<'a> {
                 bail!("{}: unsupported output format (expected .exr or .png)", o.display());
             }
         }
+        for o in outputs.iter().chain(&args.stats_json).chain(&args.report) {
+            render::film::check_file_name(o)?;
+        }
         // Never overwrite what the render reads: an --out naming one of the scene's textures
         // would destroy it (and change the next render).
         let inputs: Vec<PathBuf> = scene.files.iter().filter_map(|f| f.canonicalize().ok()).collect();
@@ -699,9 +702,9 @@ pub(crate) fn load_scene(path: Option<&Path>, defines: &[(String, String)]) -> R
     })
 }
 
+/// Writes `bytes` to `path` through a temporary file renamed into place.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    std::fs::write(&tmp, bytes).with_context(|| format!("{}: cannot write", path.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("{}: cannot move into place", path.display()))
+    Ok(render::film::write_through_temp(path, |tmp| {
+        std::fs::write(tmp, bytes).map_err(|e| render::error::Error::in_file(path, format!("cannot write: {e}")))
+    })?)
 }

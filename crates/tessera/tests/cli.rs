@@ -455,4 +455,12 @@ fn split_renders_merge_into_the_unsplit_image() {
         &["textured_mesh.xml", "input files"],
     );
     assert_eq!(std::fs::read(&texture).unwrap(), before);
+
+    // The longest legal file name is written (its temporary file's name is cut to fit); a longer
+    // one is refused before rendering.
+    let longest = format!("{}.exr", "a".repeat(251));
+    render(&["--out", &longest]);
+    assert!(dir.join(&longest).is_file());
+    let too_long = format!("{}.exr", "b".repeat(252));
+    expect_failure(&with(&base, &["--out", &too_long]), &dir, &["256 bytes long", "at most 255"]);
 }
