@@ -31,13 +31,10 @@ impl Image {
 
     /// Writes the image; the format follows the extension (`.exr` or `.png`).
     pub fn save(&self, path: &Path) -> Result<()> {
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-        if ext != "exr" && ext != "png" {
-            return Err(Error::in_file(path, format!("unsupported output format '.{ext}' (expected .exr or .png)")));
-        }
-        write_through_temp(path, |tmp| match ext.as_str() {
-            "exr" => self.write_exr(tmp),
-            _ => self.write_png(tmp),
+        let format = check_image_output(path)?;
+        write_through_temp(path, |tmp| match format {
+            ImageFormat::Exr => self.write_exr(tmp),
+            ImageFormat::Png => self.write_png(tmp),
         })
     }
 
@@ -162,6 +159,27 @@ fn temp_path(path: &Path) -> PathBuf {
         cut -= 1;
     }
     path.with_file_name(format!(".{}.{}.tmp", &name[..cut], std::process::id()))
+}
+
+/// An image file's format.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageFormat {
+    /// OpenEXR, linear float.
+    Exr,
+    /// PNG, sRGB 8-bit.
+    Png,
+}
+
+/// Checks an image output before any work is done for it (renders, merges and bakes call this
+/// first): its format from the extension, `.exr` or `.png`, and a file name file systems take.
+pub fn check_image_output(path: &Path) -> Result<ImageFormat> {
+    check_file_name(path)?;
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "exr" => Ok(ImageFormat::Exr),
+        "png" => Ok(ImageFormat::Png),
+        _ => Err(Error::in_file(path, format!("unsupported output format '.{ext}' (expected .exr or .png)"))),
+    }
 }
 
 /// Checks that an output's file name is not longer than file systems take, before any work is

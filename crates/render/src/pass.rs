@@ -78,9 +78,7 @@ impl PassInfo {
     /// Reads and checks a pass file's description (its header only, no pixel).
     pub fn read(path: &Path) -> Result<PassInfo> {
         use exr::prelude::{AttributeValue, Text};
-        let not_a_pass = |why: String| {
-            Error::in_file(path, format!("not a tessera pass file ({why}); passes are written by `tessera render --samples A..B` or `--crop`"))
-        };
+        let not_a_pass = |why: String| not_a_pass(path, why);
         let meta = exr::meta::MetaData::read_from_file(path, false)
             .map_err(|e| Error::in_file(path, format!("cannot read the EXR header: {e}")))?;
         let header = meta.headers.first().ok_or_else(|| not_a_pass("no image in the file".into()))?;
@@ -147,6 +145,14 @@ pub struct Pass {
 }
 
 const CHANNELS: [&str; 3] = ["R", "G", "B"];
+
+/// The error for a file that is not a (whole, valid) pass file, and why.
+fn not_a_pass(path: &Path, why: String) -> Error {
+    Error::in_file(
+        path,
+        format!("not a tessera pass file ({why}); passes are written by `tessera render --samples A..B` or `--crop`"),
+    )
+}
 
 fn sum_channel(c: usize, word: usize) -> String {
     format!("sum.{}.{word}", CHANNELS[c])
@@ -215,9 +221,7 @@ impl Pass {
     pub fn load(path: &Path) -> Result<Pass> {
         use exr::prelude::{read, FlatSamples, ReadChannels, ReadLayers};
         let info = PassInfo::read(path)?;
-        let not_a_pass = |why: String| {
-            Error::in_file(path, format!("not a tessera pass file ({why}); passes are written by `tessera render --samples A..B` or `--crop`"))
-        };
+        let not_a_pass = |why: String| not_a_pass(path, why);
         let b = info.bucket();
         let image = read()
             .no_deep_data()

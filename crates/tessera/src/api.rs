@@ -25,11 +25,6 @@ pub struct LoadedScene {
 impl LoadedScene {
     /// Loads a scene file (the embedded demo scene when `path` is `None`).
     pub fn load(path: Option<&Path>, defines: &[(String, String)]) -> Result<LoadedScene> {
-        for (k, _) in defines {
-            if k.is_empty() || k.contains('=') {
-                bail!("a define's name must be non-empty and hold no '=', got '{k}'");
-            }
-        }
         let t = Instant::now();
         let scene = load_scene(path, defines)?;
         Ok(LoadedScene {

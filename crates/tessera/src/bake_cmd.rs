@@ -6,7 +6,7 @@
 //! [0, 1] and sRGB-encoded (alpha linear), grey for scalars, with blue 0 for vector2.
 
 use crate::write_atomic;
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use glam::Vec2;
 use graph::bake::{self, BakeFilter, BakeSettings, BakedImage, Orientation};
 use graph::{Document, LoadOptions};
@@ -111,12 +111,12 @@ fn parse_uv(s: &str) -> Result<Vec2, String> {
 
 /// Runs `tessera bake`.
 pub fn run(args: BakeArgs) -> Result<()> {
-    let ext = args.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext != "exr" && ext != "png" {
-        bail!("{}: unsupported output format (expected .exr or .png)", args.out.display());
-    }
+    let format = render::film::check_image_output(&args.out)?;
     let Baked { image: img, ty, threads, seconds: bake_s } = args.bake.run()?;
-    let bytes = if ext == "exr" { encode_exr(&img)? } else { encode_png(&img)? };
+    let bytes = match format {
+        render::film::ImageFormat::Exr => encode_exr(&img)?,
+        render::film::ImageFormat::Png => encode_png(&img)?,
+    };
     write_atomic(&args.out, &bytes)?;
     if !args.quiet {
         eprintln!(

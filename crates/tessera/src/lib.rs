@@ -362,12 +362,9 @@ impl<'a> RenderJob<'a> {
             }
         };
         for o in &outputs {
-            let ext = o.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-            if ext != "exr" && ext != "png" {
-                bail!("{}: unsupported output format (expected .exr or .png)", o.display());
-            }
+            render::film::check_image_output(o)?;
         }
-        for o in outputs.iter().chain(&args.stats_json).chain(&args.report) {
+        for o in args.stats_json.iter().chain(&args.report) {
             render::film::check_file_name(o)?;
         }
         // Never overwrite what the render reads: an --out naming one of the scene's textures

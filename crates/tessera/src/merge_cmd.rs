@@ -18,10 +18,7 @@ pub struct MergeArgs {
 }
 
 pub fn run(args: MergeArgs) -> Result<()> {
-    let ext = args.out.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
-    if ext != "exr" && ext != "png" {
-        bail!("{}: unsupported output format (expected .exr or .png)", args.out.display());
-    }
+    render::film::check_image_output(&args.out)?;
     for p in &args.passes {
         if p.canonicalize().ok().is_some_and(|c| args.out.canonicalize().ok() == Some(c)) {
             bail!("{}: the output is one of the passes; write the merged image elsewhere", args.out.display());
