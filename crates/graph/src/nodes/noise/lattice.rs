@@ -98,24 +98,52 @@ impl HashSel {
     /// corner's 2D hash.
     #[inline]
     pub(super) fn corner(self, cx: i32, cy: i32, h2: u32) -> (DVec2, f64) {
+        self.corners().corner(cx, cy, h2)
+    }
+
+    /// What [`Self::corner`] needs for every corner of this lattice, computed once.
+    #[inline]
+    pub(super) fn corners(self) -> CornerSel {
         match self {
             HashSel::Slice(z) => {
                 let z0 = z.floor();
                 let fz = (z - z0) as f64;
                 let wz = fade(fz as f32) as f64;
+                CornerSel::Slice { z0: z0 as i32, fz, w: [1.0 - wz, wz] }
+            }
+            sel => CornerSel::Plane(sel),
+        }
+    }
+}
+
+/// A [`HashSel`] prepared for reading many corners: a slice's z layers and their fade weights
+/// are the same for every corner. (Computed per corner they cost a `floorf` call per filtered
+/// octave even on the plane lattices, where the compiler hoisted it ahead of the variant test.)
+#[derive(Clone, Copy, Debug)]
+pub(super) enum CornerSel {
+    Plane(HashSel),
+    Slice { z0: i32, fz: f64, w: [f64; 2] },
+}
+
+impl CornerSel {
+    /// [`HashSel::corner`].
+    #[inline(always)]
+    pub(super) fn corner(self, cx: i32, cy: i32, h2: u32) -> (DVec2, f64) {
+        match self {
+            CornerSel::Slice { z0, fz, w } => {
                 let mut g = DVec2::ZERO;
                 let mut k = 0.0;
-                for (l, w) in [(0, 1.0 - wz), (1, wz)] {
+                for (l, w) in [(0, w[0]), (1, w[1])] {
                     if w == 0.0 {
                         continue;
                     }
-                    let g3 = gradient3_vector(hash::hash3(cx, cy, (z0 as i32).wrapping_add(l)));
+                    let g3 = gradient3_vector(hash::hash3(cx, cy, z0.wrapping_add(l)));
                     g += DVec2::new(g3[0], g3[1]) * w;
                     k += g3[2] * (fz - l as f64) * w;
                 }
                 (g, k)
             }
-            _ => (gradient_vector(self.pick(h2)), 0.0),
+            CornerSel::Plane(sel) => (gradient_vector(sel.pick(h2)), 0.0),
         }
     }
 }
@@ -261,7 +289,11 @@ pub(super) trait Lattice<const D: usize> {
     /// (each multiplying the offset along its own axis), then for 2D a constant (a `z = const`
     /// slice of the 3D lattice folds its z layers into it; 0 otherwise). Filtered corner sums
     /// read these.
-    fn corner(sel: Self::Sel, c: [i32; D], h: u32) -> [f64; 3];
+    fn corner(sel: Self::Corners, c: [i32; D], h: u32) -> [f64; 3];
+    /// A lattice selection prepared for [`Self::corner`] (what is the same for every corner).
+    type Corners: Copy;
+    /// [`Self::Corners`] of lattice `sel`.
+    fn corners(sel: Self::Sel) -> Self::Corners;
     /// The gradient scale of lattice `sel`, for the filtered corner sums (f64).
     fn scale(sel: Self::Sel) -> f64;
     /// Cell noise of cell `c`: MaterialX `mx_cell_noise_float`, or channel `k` of
@@ -289,9 +321,14 @@ impl Lattice<2> for Dim<2> {
     }
     const GRADIENT_SCALE: f32 = GRADIENT_SCALE_2D;
     #[inline(always)]
-    fn corner(sel: HashSel, c: [i32; 2], h: u32) -> [f64; 3] {
+    fn corner(sel: CornerSel, c: [i32; 2], h: u32) -> [f64; 3] {
         let (g, k) = sel.corner(c[0], c[1], h);
         [g.x, g.y, k]
+    }
+    type Corners = CornerSel;
+    #[inline(always)]
+    fn corners(sel: HashSel) -> CornerSel {
+        sel.corners()
     }
     #[inline(always)]
     fn scale(sel: HashSel) -> f64 {
@@ -329,6 +366,11 @@ impl Lattice<3> for Dim<3> {
     #[inline(always)]
     fn corner(sel: Sel, _: [i32; 3], h: u32) -> [f64; 3] {
         gradient3_vector(sel.pick(h))
+    }
+    type Corners = Sel;
+    #[inline(always)]
+    fn corners(sel: Sel) -> Sel {
+        sel
     }
     #[inline(always)]
     fn scale(_: Sel) -> f64 {

@@ -122,11 +122,15 @@ pub(super) fn corner_sum<const D: usize, const N: usize, const TABLE: bool>(
             if TABLE { axis_terms(m, s, lo, hi, &mut axes[a]) } else { axis_terms_exact(m, s, lo, hi, &mut axes[a]) };
     }
     *out = [[0.0; 4]; 4];
+    let mut corners = [Dim::<D>::corners(sels[0]); 4];
+    for (c, sel) in corners.iter_mut().zip(sels) {
+        *c = Dim::<D>::corners(*sel);
+    }
     // Float noise (one lattice) gets its own copy of the loops, without the loop over channels.
     if sels.len() == 1 {
-        corner_products::<D, N>(&axes, &n, std::slice::from_ref(&sels[0]), out);
+        corner_products::<D, N>(&axes, &n, &corners[..1], out);
     } else {
-        corner_products::<D, N>(&axes, &n, sels, out);
+        corner_products::<D, N>(&axes, &n, &corners[..sels.len()], out);
     }
     work.lattice += n.iter().product::<usize>() as u64;
     for (o, sel) in out.iter_mut().zip(sels) {
@@ -144,7 +148,7 @@ pub(super) fn corner_sum<const D: usize, const N: usize, const TABLE: bool>(
 fn corner_products<const D: usize, const N: usize>(
     axes: &[[(i32, AxisTerms); N]; D],
     n: &[usize; D],
-    sels: &[<Dim<D> as Lattice<D>>::Sel],
+    sels: &[<Dim<D> as Lattice<D>>::Corners],
     out: &mut [[f64; 4]; 4],
 ) where
     Dim<D>: Lattice<D>,
