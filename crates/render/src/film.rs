@@ -1,11 +1,12 @@
 //! The rendered image and how it is written: EXR (linear float32 RGB) or PNG (sRGB, 8-bit),
-//! chosen by extension, always through a temporary file renamed into place so that an
-//! interrupted write never leaves a truncated image under the final name.
+//! chosen by extension, always through [`crate::output`] (a temporary file moved into place, so
+//! that an interrupted write never leaves a truncated image under the final name).
 
 use crate::error::{Error, Result};
 use crate::math::Spectrum;
+pub use crate::output::{check_file_name, check_output, write_through_temp, MAX_FILE_NAME_BYTES};
 use crate::texture::linear_to_srgb;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// A linear RGB image, row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
@@ -133,34 +134,6 @@ impl PixelSum {
     }
 }
 
-/// Writes a file by `write`ing a temporary one beside `path` and renaming it into place, so
-/// that an interrupted or failed write never leaves a partial file under the final name.
-pub fn write_through_temp(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
-    let tmp = temp_path(path);
-    if let Err(e) = write(&tmp) {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(e);
-    }
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        Error::in_file(path, format!("cannot move the finished file into place: {e}"))
-    })
-}
-
-/// The longest file name most file systems take (NAME_MAX), in bytes.
-pub const MAX_FILE_NAME_BYTES: usize = 255;
-
-/// The temporary file beside `path`: its name, cut short enough that the temporary name itself
-/// is a legal file name whenever `path`'s is, then the process id.
-fn temp_path(path: &Path) -> PathBuf {
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let mut cut = name.len().min(MAX_FILE_NAME_BYTES - 32);
-    while !name.is_char_boundary(cut) {
-        cut -= 1;
-    }
-    path.with_file_name(format!(".{}.{}.tmp", &name[..cut], std::process::id()))
-}
-
 /// An image file's format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ImageFormat {
@@ -171,28 +144,16 @@ pub enum ImageFormat {
 }
 
 /// Checks an image output before any work is done for it (renders, merges and bakes call this
-/// first): its format from the extension, `.exr` or `.png`, and a file name file systems take.
+/// first): its format from the extension, `.exr` or `.png`, and that it can be written
+/// ([`check_output`]: a legal file name in a folder that takes new files).
 pub fn check_image_output(path: &Path) -> Result<ImageFormat> {
-    check_file_name(path)?;
+    check_output(path)?;
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
         "exr" => Ok(ImageFormat::Exr),
         "png" => Ok(ImageFormat::Png),
         _ => Err(Error::in_file(path, format!("unsupported output format '.{ext}' (expected .exr or .png)"))),
     }
-}
-
-/// Checks that an output's file name is not longer than file systems take, before any work is
-/// done for it.
-pub fn check_file_name(path: &Path) -> Result<()> {
-    let len = path.file_name().map_or(0, |n| n.len());
-    if len > MAX_FILE_NAME_BYTES {
-        return Err(Error::in_file(
-            path,
-            format!("the file name is {len} bytes long; file systems take at most {MAX_FILE_NAME_BYTES}"),
-        ));
-    }
-    Ok(())
 }
 
 /// Relative mean squared error of `a` against `reference`: mean over pixels and channels of

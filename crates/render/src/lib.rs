@@ -31,6 +31,7 @@ pub mod loader;
 pub mod material;
 pub mod math;
 pub mod mesh;
+pub mod output;
 pub mod pass;
 pub mod pathfootprint;
 pub mod profiling;

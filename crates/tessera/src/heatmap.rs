@@ -122,16 +122,16 @@ pub fn write_heatmap(aov: &Image, missing: f32, path: &Path) -> anyhow::Result<(
         let tw = label.len() * 4 * scale;
         canvas.text(x.saturating_sub(tw / 2).min(cw - tw), bar_y + bar_h + 5, &label, scale, white);
     }
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let tmp = path.with_file_name(format!(".{name}.{}.tmp", std::process::id()));
-    image::save_buffer_with_format(
-        &tmp,
-        &canvas.px,
-        cw as u32,
-        ch as u32,
-        image::ColorType::Rgb8,
-        image::ImageFormat::Png,
-    )
-    .map_err(|e| anyhow::anyhow!("{}: cannot write PNG: {e}", path.display()))?;
-    std::fs::rename(&tmp, path).map_err(|e| anyhow::anyhow!("{}: cannot move into place: {e}", path.display()))
+    render::film::write_through_temp(path, |tmp| {
+        image::save_buffer_with_format(
+            tmp,
+            &canvas.px,
+            cw as u32,
+            ch as u32,
+            image::ColorType::Rgb8,
+            image::ImageFormat::Png,
+        )
+        .map_err(|e| render::error::Error::in_file(path, format!("cannot write PNG: {e}")))
+    })?;
+    Ok(())
 }

@@ -165,6 +165,7 @@ fn parse_footprint(s: &str) -> Result<FootprintMode, String> {
 /// and exits with status 1.
 pub fn run_cli() {
     let cli = Cli::parse();
+    remove_temporaries_on_signals();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
         Command::Footprint(args) => footprint_cmd::run(args),
@@ -178,6 +179,19 @@ pub fn run_cli() {
     if let Err(e) = result {
         eprintln!("error: {e:#}");
         std::process::exit(1);
+    }
+}
+
+/// On SIGINT, SIGTERM or SIGHUP: remove the temporary files of outputs being written (the
+/// final files stay as they were) and exit with 130, as an interrupted shell command does.
+fn remove_temporaries_on_signals() {
+    let installed = ctrlc::set_handler(|| {
+        render::output::remove_temporaries();
+        eprintln!("interrupted: no output was written");
+        std::process::exit(130);
+    });
+    if let Err(e) = installed {
+        eprintln!("warning: cannot handle interrupts ({e}); an interrupted run may leave temporary files");
     }
 }
 
@@ -217,6 +231,9 @@ pub(crate) fn render_loaded(
     }
 
     let t_write = Instant::now();
+    // Every file of this render is staged first and moved into place together at the end: when
+    // one cannot be written, no old output has been replaced by a new one.
+    let batch = render::output::OutputBatch::begin();
     let (images, aov_files) = match (write, job.pass()) {
         (false, _) => (Vec::new(), Vec::new()),
         (true, true) => {
@@ -230,6 +247,27 @@ pub(crate) fn render_loaded(
     };
     let write_s = t_write.elapsed().as_secs_f64();
     let render_s = r.out.time.as_secs_f64();
+    let phases = Phases { load_s, cache_setup_s: r.cache_setup_s, render_s, write_s };
+    let stats = stats_of(&job, scene, &r, &nonfinite, &images, &aov_files, phases);
+    if let Some(path) = &args.stats_json {
+        write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
+    }
+    let mut report = None;
+    if let Some(a) = &r.auto {
+        let dir = match (&args.report, write) {
+            (Some(d), _) => Some(d.clone()),
+            (None, true) => {
+                let stem = job.outputs[0].with_extension("");
+                Some(PathBuf::from(format!("{}.report", stem.display())))
+            }
+            (None, false) => None,
+        };
+        if let Some(dir) = dir {
+            let measured = select_cmd::measured_of_render(&r.out.graph_stats, r.node_cache.as_ref(), render_s);
+            report = Some((a.write_report(&dir, measured)?, dir));
+        }
+    }
+    batch.commit()?;
     if !args.quiet {
         print_summary(&job, scene, &r, &images, &aov_files);
     }
@@ -244,28 +282,9 @@ pub(crate) fn render_loaded(
             render::film::SAMPLE_LIMIT
         );
     }
-    let phases = Phases { load_s, cache_setup_s: r.cache_setup_s, render_s, write_s };
-    let stats = stats_of(&job, scene, &r, &nonfinite, &images, &aov_files, phases);
-    if let Some(path) = &args.stats_json {
-        write_atomic(path, serde_json::to_string_pretty(&stats)?.as_bytes())?;
-    }
-    if let Some(a) = &r.auto {
-        let dir = match (&args.report, write) {
-            (Some(d), _) => Some(d.clone()),
-            (None, true) => {
-                let stem = job.outputs[0].with_extension("");
-                Some(PathBuf::from(format!("{}.report", stem.display())))
-            }
-            (None, false) => None,
-        };
-        if let Some(dir) = dir {
-            let measured = select_cmd::measured_of_render(&r.out.graph_stats, r.node_cache.as_ref(), render_s);
-            let comparison = a.write_report(&dir, measured)?;
-            if !args.quiet {
-                eprintln!("{comparison}");
-                eprintln!("report: {}", dir.display());
-            }
-        }
+    if let (Some((comparison, dir)), false) = (&report, args.quiet) {
+        eprintln!("{comparison}");
+        eprintln!("report: {}", dir.display());
     }
     Ok((r.out, stats))
 }
@@ -364,7 +383,10 @@ impl<'a> RenderJob<'a> {
         for o in &outputs {
             render::film::check_image_output(o)?;
         }
-        for o in args.stats_json.iter().chain(&args.report) {
+        if let Some(o) = &args.stats_json {
+            render::film::check_output(o)?;
+        }
+        if let Some(o) = &args.report {
             render::film::check_file_name(o)?;
         }
         // Never overwrite what the render reads: an --out naming one of the scene's textures

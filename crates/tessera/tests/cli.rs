@@ -464,3 +464,96 @@ fn split_renders_merge_into_the_unsplit_image() {
     let too_long = format!("{}.exr", "b".repeat(252));
     expect_failure(&with(&base, &["--out", &too_long]), &dir, &["256 bytes long", "at most 255"]);
 }
+
+/// Outputs are never destroyed: a symbolic link is followed (the link stays), special files
+/// (stdout, a FIFO) are written through, unwritable folders are found before rendering, and
+/// an interrupted run leaves neither its outputs nor their temporary files.
+#[test]
+fn outputs_follow_links_write_through_special_files_and_are_checked_first() {
+    use std::os::unix::fs::FileTypeExt;
+    let dir = temp_dir("outputs");
+    let small = ["render", "-D", "res=16", "--spp", "1", "--quiet"];
+    let run = |extra: &[&str]| {
+        let args: Vec<&str> = small.iter().chain(extra).copied().collect();
+        let out = tessera().current_dir(&dir).args(&args).output().unwrap();
+        assert!(out.status.success(), "{args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        out
+    };
+    // A link to an existing image: the image it names is replaced, the link stays.
+    std::fs::write(dir.join("real.exr"), "old").unwrap();
+    std::os::unix::fs::symlink("real.exr", dir.join("link.exr")).unwrap();
+    run(&["--out", "link.exr"]);
+    assert!(std::fs::symlink_metadata(dir.join("link.exr")).unwrap().file_type().is_symlink());
+    assert!(std::fs::read(dir.join("real.exr")).unwrap().starts_with(&[0x76, 0x2f, 0x31, 0x01]), "not an EXR");
+    // Standard output by name.
+    let out = run(&["--out", "x.exr", "--stats-json", "/dev/stdout"]);
+    assert!(String::from_utf8_lossy(&out.stdout).contains("\"schema\": \"tessera.stats/1\""));
+    // A FIFO is written through to its reader and stays a FIFO.
+    let fifo = dir.join("stats.fifo");
+    assert!(Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+    let reader = {
+        let fifo = fifo.clone();
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    run(&["--out", "x.exr", "--stats-json", fifo.to_str().unwrap()]);
+    assert!(reader.join().unwrap().contains("tessera.stats/1"));
+    assert!(std::fs::symlink_metadata(&fifo).unwrap().file_type().is_fifo());
+
+    // Unwritable places are errors before the (long) render, and nothing is written.
+    let long = ["render", "-D", "res=256", "--spp", "4096"];
+    fn with<'a>(long: &[&'a str], extra: &[&'a str]) -> Vec<&'a str> {
+        long.iter().chain(extra).copied().collect()
+    }
+    expect_failure(&with(&long, &["--out", "missing/x.exr"]), &dir, &["missing/x.exr", "folder", "does not exist"]);
+    expect_failure(
+        &with(&long, &["--out", "y.exr", "--stats-json", "missing/s.json"]),
+        &dir,
+        &["missing/s.json", "does not exist"],
+    );
+    expect_failure(&with(&long, &["--out", "."]), &dir, &["is a folder"]);
+    expect_failure(&with(&long, &["--out", "y.exr", "--stats-json", "."]), &dir, &["is a folder"]);
+    assert!(!dir.join("y.exr").exists());
+
+    // Interrupted while writing (a large image, its PNG and its footprint AOV take a while to
+    // encode): exit 130, no outputs and no temporary files. The poll catches the write phase.
+    let names = |d: &Path| -> Vec<String> {
+        std::fs::read_dir(d).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect()
+    };
+    let sig = dir.join("sig");
+    std::fs::create_dir_all(&sig).unwrap();
+    let mut seen = false;
+    for _ in 0..3 {
+        let mut child = tessera()
+            .current_dir(&sig)
+            .args(["render", "-D", "res=1536", "--spp", "1", "--free-textures", "--aov", "footprint", "--quiet"])
+            .spawn()
+            .unwrap();
+        let status = loop {
+            if let Some(s) = child.try_wait().unwrap() {
+                break Some(s);
+            }
+            if names(&sig).iter().any(|n| n.ends_with(".tmp")) {
+                seen = true;
+                let kill = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+                assert!(kill.success());
+                break None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        };
+        match status {
+            Some(_) => {
+                // Finished before the poll saw a temporary file: clean up and try again.
+                for n in names(&sig) {
+                    std::fs::remove_file(sig.join(n)).unwrap();
+                }
+            }
+            None => {
+                let s = child.wait().unwrap();
+                assert_eq!(s.code(), Some(130), "interrupted run: {s:?}");
+                assert_eq!(names(&sig), Vec::<String>::new(), "an interrupted run left files");
+                break;
+            }
+        }
+    }
+    assert!(seen, "three renders finished before their write phase was seen");
+}
