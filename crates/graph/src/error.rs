@@ -34,11 +34,14 @@ pub enum BuildError {
         input: String,
     },
     /// A connection or value of the wrong type.
-    #[error("type mismatch at `{node}.{input}`: expected {expected}, found {found}")]
+    #[error(
+        "type mismatch at `{node}{}`: expected {expected}, found {found}",
+        if input.is_empty() { String::new() } else { format!(".{input}") }
+    )]
     TypeMismatch {
-        /// Node name.
+        /// Node name (or the output's qualified name, for a graph output).
         node: String,
-        /// Input name.
+        /// Input name (empty for a graph output).
         input: String,
         /// What the input accepts.
         expected: String,
@@ -144,11 +147,11 @@ pub struct Unsupported {
 
 impl fmt::Display for Unsupported {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "`{}` (node `{}`", self.category, self.node)?;
-        if !self.detail.is_empty() {
-            write!(f, ", {}", self.detail)?;
+        if self.detail.is_empty() {
+            write!(f, "`{}` (node `{}`) at {}", self.category, self.node, self.location)
+        } else {
+            write!(f, "node `{}` at {}: {}", self.node, self.location, self.detail)
         }
-        write!(f, ") at {}", self.location)
     }
 }
 

@@ -347,7 +347,8 @@ impl<'a, 'i> Importer<'a, 'i> {
                 continue;
             }
             let Some(spec) = def.inputs.iter().find(|s| s.name == iname) else {
-                let f = self.unsupported(category, q, format!("input `{iname}`"), inp);
+                let names: Vec<&str> = def.inputs.iter().map(|s| s.name).collect();
+                let f = self.unsupported(category, q, no_such_input(category, iname, &names), inp);
                 merge_soft(&mut soft, f)?;
                 continue;
             };
@@ -377,7 +378,7 @@ impl<'a, 'i> Importer<'a, 'i> {
             ValueType::from_name(tyname)
         };
         let Some(ty) = ty else {
-            let f = self.unsupported(category, q, format!("type `{tyname}`"), el);
+            let f = self.unsupported(category, q, unknown_type(tyname), el);
             merge_soft(&mut soft, f)?;
             return Err(Fail::Soft(soft));
         };
@@ -397,7 +398,7 @@ impl<'a, 'i> Importer<'a, 'i> {
         let id = match self.builder.add_node(q, category, ty, &inputs, params) {
             Ok(id) => id,
             Err(BuildError::UnsupportedType { .. }) => {
-                return Err(self.unsupported(category, q, format!("type `{tyname}`"), el));
+                return Err(self.unsupported(category, q, format!("no `{tyname}` variant in tessera"), el));
             }
             Err(e) => return Err(self.hard(el, e.into())),
         };
@@ -406,5 +407,72 @@ impl<'a, 'i> Importer<'a, 'i> {
             Some(c) => self.convert_colors(q, src, ty, &c, el),
             None => Ok(src),
         }
+    }
+}
+
+/// The closest of `names` to a misspelt `name`, when it is close: at most one edit per three
+/// letters (at least one, at most three), a swap of neighbours counting as one.
+fn closest<'n>(name: &str, names: &[&'n str]) -> Option<&'n str> {
+    let reach = (name.chars().count() / 3).clamp(1, 3);
+    names.iter().map(|n| (strsim::damerau_levenshtein(name, n), *n)).filter(|(d, _)| *d <= reach).min().map(|(_, n)| n)
+}
+
+/// The message for an input the node's definition does not have: the inputs it does have, and
+/// the likely one when the name is a misspelling of it.
+fn no_such_input(category: &str, input: &str, names: &[&str]) -> String {
+    let guess = closest(input, names).map_or(String::new(), |n| format!("did you mean `{n}`? "));
+    format!("`{category}` has no input `{input}`; {guess}its inputs: {}", names.join(", "))
+}
+
+/// MaterialX's data types that tessera does not evaluate as node outputs.
+const OTHER_MATERIALX_TYPES: &[&str] = &[
+    "matrix33",
+    "matrix44",
+    "string",
+    "filename",
+    "integerarray",
+    "floatarray",
+    "color3array",
+    "color4array",
+    "vector2array",
+    "vector3array",
+    "vector4array",
+    "stringarray",
+    "BSDF",
+    "EDF",
+    "VDF",
+    "surfaceshader",
+    "displacementshader",
+    "volumeshader",
+    "lightshader",
+    "material",
+];
+
+/// The message for a node output type no node of tessera's library has: a MaterialX type
+/// tessera does not evaluate, or a name that is no MaterialX type at all (with the likely one).
+fn unknown_type(ty: &str) -> String {
+    const VALUE_TYPES: &[&str] = &["float", "integer", "boolean", "vector2", "vector3", "vector4", "color3", "color4"];
+    if OTHER_MATERIALX_TYPES.contains(&ty) {
+        return format!("type `{ty}` is not one tessera evaluates (value types: {})", VALUE_TYPES.join(", "));
+    }
+    let all: Vec<&str> = VALUE_TYPES.iter().chain(OTHER_MATERIALX_TYPES).copied().collect();
+    let guess = closest(ty, &all).map_or(String::new(), |n| format!("; did you mean `{n}`?"));
+    format!("`{ty}` is not a MaterialX type{guess}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn misspellings_get_the_likely_name() {
+        assert_eq!(closest("texcord", &["texcoord", "octaves"]), Some("texcoord"));
+        assert_eq!(closest("amplitud", &["amplitude", "pivot"]), Some("amplitude"));
+        assert_eq!(closest("zzz", &["texcoord", "octaves"]), None);
+        assert_eq!(closest("in", &["in1", "in2"]), Some("in1"));
+        assert!(unknown_type("flaot").contains("did you mean `float`"));
+        assert!(unknown_type("colour3").contains("did you mean `color3`"));
+        assert!(unknown_type("matrix33").contains("not one tessera evaluates"));
+        assert!(!unknown_type("qqqqqqq").contains("did you mean"));
     }
 }

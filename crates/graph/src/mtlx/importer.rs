@@ -262,8 +262,20 @@ impl<'a, 'i> Importer<'a, 'i> {
     }
 
     pub(super) fn reason(&self, ix: &[usize]) -> String {
-        let items: Vec<String> = ix.iter().map(|&k| self.unsupported[k].to_string()).collect();
-        format!("needs unsupported {}", items.join(", "))
+        // Unknown categories are unsupported; a known node with a bad input or type is named
+        // with what is wrong with it.
+        let (unknown, bad): (Vec<&Unsupported>, Vec<&Unsupported>) =
+            ix.iter().map(|&k| &self.unsupported[k]).partition(|u| u.detail.is_empty());
+        let mut parts = Vec::new();
+        if !unknown.is_empty() {
+            let items: Vec<String> = unknown.iter().map(|u| u.to_string()).collect();
+            parts.push(format!("needs unsupported {}", items.join(", ")));
+        }
+        if !bad.is_empty() {
+            let items: Vec<String> = bad.iter().map(|u| u.to_string()).collect();
+            parts.push(format!("needs {}", items.join("; ")));
+        }
+        parts.join("; ")
     }
 
     pub(super) fn name_of(&self, el: XNode<'a, 'i>) -> Result<&'a str, LoadError> {

@@ -187,11 +187,19 @@ impl<'a, 'i> Importer<'a, 'i> {
         if let (Some(t), Source::Node { .. }) = (declared, &src) {
             let found = self.builder.source_type(&src);
             if found != t {
+                // A node's input is named as `node.input`; a graph output by its own name.
+                let (node, input) = match inp.parent_element() {
+                    Some(p) if !matches!(p.tag_name().name(), "nodegraph" | "materialx") => (
+                        qualify(&self.scopes[scope].prefix, p.attribute("name").unwrap_or("?")),
+                        inp.attribute("name").unwrap_or("?").to_string(),
+                    ),
+                    _ => (from, String::new()),
+                };
                 return Err(self.hard(
                     inp,
                     LoadErrorKind::Build(BuildError::TypeMismatch {
-                        node: from,
-                        input: inp.attribute("name").unwrap_or("?").to_string(),
+                        node,
+                        input,
                         expected: t.name().to_string(),
                         found,
                     }),

@@ -142,3 +142,28 @@ fn node_graphs_multiplying_each_other_are_refused() {
     let d = Document::load(&ok).unwrap_or_else(|e| panic!("{e}"));
     assert!(d.graph().node_count() > 1000, "{}", d.graph().node_count());
 }
+
+/// A misspelt input, a misspelt type and a mistyped connection name what is wrong and where:
+/// not "unsupported `fractal2d`", and a port that exists (`g/n.texcoord`, the node's input).
+#[test]
+fn misspellings_and_mismatches_name_the_element_and_the_likely_fix() {
+    let node = |tag: &str, ty: &str, input: &str, input_ty: &str| {
+        format!(
+            "<nodegraph name=\"g\">\n  <texcoord name=\"t\" type=\"vector2\"/>\n  <{tag} name=\"n\" type=\"{ty}\">\n    \
+             <input name=\"{input}\" type=\"{input_ty}\" nodename=\"t\"/>\n  </{tag}>\n  \
+             <output name=\"out\" type=\"float\" nodename=\"n\"/>\n</nodegraph>"
+        )
+    };
+    let (p, e) = load("input.mtlx", &node("fractal2d", "float", "texcord", "vector2"));
+    let m = e.to_string();
+    assert!(m.contains(&format!("{}:6:", p.display())), "{m}");
+    assert!(m.contains("`fractal2d` has no input `texcord`") && m.contains("did you mean `texcoord`?"), "{m}");
+    assert!(!m.contains("unsupported `fractal2d`"), "{m}");
+    let (p, e) = load("type.mtlx", &node("noise2d", "flaot", "texcoord", "vector2"));
+    let m = e.to_string();
+    assert!(m.contains(&format!("{}:5:", p.display())), "{m}");
+    assert!(m.contains("`flaot` is not a MaterialX type; did you mean `float`?"), "{m}");
+    let (p, e) = load("port.mtlx", &node("noise2d", "float", "texcoord", "vector3"));
+    check(&e, &p, 6);
+    assert!(e.to_string().contains("type mismatch at `g/n.texcoord`: expected vector3, found vector2"), "{e}");
+}
