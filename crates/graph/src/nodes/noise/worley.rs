@@ -11,6 +11,19 @@ use glam::{DVec2, DVec3, Vec2, Vec3};
 /// Unfiltered MaterialX `mx_worley_noise_*(vec2)` (Euclidean metric): the `n` nearest
 /// distances (style 0) or the nearest feature's cell value(s) (style 1).
 pub fn worley_point(p: Vec2, jitter: f32, style: i32, n: usize) -> [f32; 3] {
+    worley_point_with(p, style, n, |cx, cy| feature_offset(cx, cy, jitter))
+}
+
+/// Where cell `(cx, cy)`'s feature point lies within the cell (MaterialX's jittered offset).
+#[inline(always)]
+fn feature_offset(cx: i32, cy: i32, jitter: f32) -> Vec2 {
+    let off = Vec2::new(cell_vec3(cx, cy, 0), cell_vec3(cx, cy, 1));
+    (off - 0.5) * jitter + 0.5
+}
+
+/// [`worley_point`] with the cells' feature offsets from `offset(cx, cy)`.
+#[inline(always)]
+fn worley_point_with(p: Vec2, style: i32, n: usize, mut offset: impl FnMut(i32, i32) -> Vec2) -> [f32; 3] {
     let (x0, y0) = (ifloor(p.x), ifloor(p.y));
     let local = Vec2::new(p.x - x0 as f32, p.y - y0 as f32);
     let mut d = [1e6f32; 3];
@@ -18,8 +31,7 @@ pub fn worley_point(p: Vec2, jitter: f32, style: i32, n: usize) -> [f32; 3] {
     for x in -1..=1 {
         for y in -1..=1 {
             let (cx, cy) = (x0.wrapping_add(x), y0.wrapping_add(y));
-            let off = Vec2::new(cell_vec3(cx, cy, 0), cell_vec3(cx, cy, 1));
-            let off = (off - 0.5) * jitter + 0.5;
+            let off = offset(cx, cy);
             let cell = Vec2::new(x as f32, y as f32) + off - local;
             let dist = cell.dot(cell);
             if dist < d[0] {
@@ -96,10 +108,12 @@ pub(super) fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ct
     let (mut e, mut e2, mut ex, mut ey) = ([0.0f64; 3], [0.0f64; 3], [0.0f64; 3], [0.0f64; 3]);
     // 3×3 nodes suffice while the footprint is small against a cell; 5×5 beyond.
     let rule: &[(f64, f64)] = if smax < 0.2 { &gaussian::HERMITE3 } else { &gaussian::HERMITE5 };
+    // The nodes' 3 × 3 cell neighbourhoods overlap: each cell's feature point is hashed once.
+    let mut features = FeatureCells::around(p, s);
     for &(zy, wy) in rule {
         for &(zx, wx) in rule {
             let q = p + DVec2::new(zx * s.x, zy * s.y);
-            let v = worley_point(q.as_vec2(), jitter, style, n);
+            let v = worley_point_with(q.as_vec2(), style, n, |cx, cy| features.offset(cx, cy, jitter));
             for k in 0..n {
                 let w = wx * wy;
                 let vk = v[k] as f64;
@@ -124,6 +138,49 @@ pub(super) fn worley2d(stats: &PatternStats, ty: ValueType, ins: &[Filtered], ct
         out.ch[k] = to_uv(&m, &j);
     }
     out
+}
+
+/// Cells' feature offsets, computed on first use, over the block of cells a filtered Worley
+/// evaluation's quadrature nodes can reach (nodes within 2.86σ of the centre, σ < 2 cells, and
+/// each node's 3 × 3 neighbourhood: at most 16 cells per axis).
+struct FeatureCells {
+    x0: i32,
+    y0: i32,
+    known: [u16; FEATURE_BLOCK],
+    offsets: [[Vec2; FEATURE_BLOCK]; FEATURE_BLOCK],
+}
+
+/// Cells per axis of a [`FeatureCells`] block.
+const FEATURE_BLOCK: usize = 16;
+
+impl FeatureCells {
+    /// The block whose lower corner is one cell below the lowest node's cell (in f32, as the
+    /// nodes' cells are found).
+    fn around(p: DVec2, s: DVec2) -> FeatureCells {
+        let reach = 2.86 * s;
+        let lo = (p - reach).as_vec2();
+        FeatureCells {
+            x0: ifloor(lo.x).wrapping_sub(2),
+            y0: ifloor(lo.y).wrapping_sub(2),
+            known: [0; FEATURE_BLOCK],
+            offsets: [[Vec2::ZERO; FEATURE_BLOCK]; FEATURE_BLOCK],
+        }
+    }
+
+    /// Cell `(cx, cy)`'s feature offset ([`feature_offset`]), from the block when the cell is in
+    /// it (always, for the nodes the block was made for).
+    #[inline(always)]
+    fn offset(&mut self, cx: i32, cy: i32, jitter: f32) -> Vec2 {
+        let (i, j) = (cx.wrapping_sub(self.x0) as u32 as usize, cy.wrapping_sub(self.y0) as u32 as usize);
+        if i >= FEATURE_BLOCK || j >= FEATURE_BLOCK {
+            return feature_offset(cx, cy, jitter);
+        }
+        if self.known[j] & (1 << i) == 0 {
+            self.known[j] |= 1 << i;
+            self.offsets[j][i] = feature_offset(cx, cy, jitter);
+        }
+        self.offsets[j][i]
+    }
 }
 
 /// Unfiltered MaterialX `mx_worley_noise_*(vec3)` (Euclidean metric): the `n` nearest
