@@ -127,21 +127,18 @@ struct TextureFootprint {
     shift: CentreShift,
 }
 
-/// A path's footprint at a hit it reached: what textures read there, and the estimator's state
-/// that the path keeps if it scatters there.
-struct HitFootprint {
-    texture: TextureFootprint,
-    state: PathFootprint,
-}
-
 /// The footprint a camera path carries from vertex to vertex (pbrt carries its ray
 /// differentials the same way).
 struct FootprintCarrier {
     /// Whether footprints are tracked at all: they cost a few hundred nanoseconds per bounce, so
     /// only when a material's textures or the observer will read them.
     track: bool,
-    /// The estimator's state after the last scattering vertex (or at the camera).
-    state: PathFootprint,
+    /// The estimator's state after the last scattering vertex (or at the camera), `states[cur]`,
+    /// and at the hit the path reached last, `states[1 − cur]` (written by [`Self::arrive`]):
+    /// scattering there flips `cur`. A state is most of a kilobyte; copied out of the carrier at
+    /// every hit and back at every scattering vertex, it was 8 % of an untextured render.
+    states: [PathFootprint; 2],
+    cur: usize,
     /// The last scattering vertex and the BSDF sample taken there; `None` before the first.
     last: Option<(Vertex, BsdfSample)>,
 }
@@ -150,45 +147,55 @@ impl FootprintCarrier {
     fn new(scene: &Scene, settings: &RenderSettings, observer_wants_footprints: bool) -> Self {
         let track = settings.footprint != FootprintMode::None
             && ((scene.footprints_needed && !settings.free_textures) || observer_wants_footprints);
-        FootprintCarrier { track, state: PathFootprint::None, last: None }
+        FootprintCarrier { track, states: [PathFootprint::None; 2], cur: 0, last: None }
+    }
+
+    /// The estimator's state at the last scattering vertex.
+    fn state(&self) -> &PathFootprint {
+        &self.states[self.cur]
     }
 
     /// The footprint at hit `si`, carried along direction `d` from the last scattering vertex
     /// (or the camera); on the camera ray, textures are filtered around the pixel centre's hit.
+    /// The estimator's state there is kept aside until the path scatters at `si`.
     fn arrive(
-        &self,
+        &mut self,
         scene: &Scene,
         settings: &RenderSettings,
         cam: &CameraRay,
         si: &SurfaceInteraction,
         d: Vec3,
-    ) -> HitFootprint {
-        let vertex = if self.track { Some(si.footprint_vertex()) } else { None };
-        let (state, var) = match (&vertex, &self.last) {
-            (Some(v), None) => PathFootprint::start(settings.footprint, &scene.camera, cam, v, settings.spp),
-            (Some(v), Some((pv, bs))) => {
-                let mut state = self.state;
-                let var = state.advance(pv, bs, d, v);
-                (state, var)
+    ) -> TextureFootprint {
+        if !self.track {
+            return TextureFootprint { vertex: None, var: DMat2::ZERO, shift: CentreShift::default() };
+        }
+        let v = si.footprint_vertex();
+        let next = 1 - self.cur;
+        let (var, shift) = match &self.last {
+            None => {
+                let (state, var) = PathFootprint::start(settings.footprint, &scene.camera, cam, &v, settings.spp);
+                self.states[next] = state;
+                (var, first_vertex_shift(settings, cam, &v))
             }
-            _ => (self.state, DMat2::ZERO),
+            Some((pv, bs)) => {
+                self.states[next] = self.states[self.cur];
+                (self.states[next].advance(pv, bs, d, &v), CentreShift::default())
+            }
         };
-        let shift = match (&vertex, &self.last) {
-            (Some(v), None) => first_vertex_shift(settings, cam, v),
-            _ => CentreShift::default(),
-        };
-        HitFootprint { texture: TextureFootprint { vertex, var, shift }, state }
+        TextureFootprint { vertex: Some(v), var, shift }
     }
 
-    /// The path scatters at the hit it arrived at (`here`): it keeps the footprint there.
-    fn scatter_at(&mut self, here: &HitFootprint) {
-        self.state = here.state;
-    }
-
-    /// The path left `here` by BSDF sample `bs`.
-    fn sampled(&mut self, here: &HitFootprint, bs: BsdfSample) {
+    /// The path scatters at the hit it arrived at last: it keeps the footprint there.
+    fn scatter_at(&mut self) {
         if self.track {
-            self.last = here.texture.vertex.map(|v| (v, bs));
+            self.cur = 1 - self.cur;
+        }
+    }
+
+    /// The path left the hit with footprint `here` by BSDF sample `bs`.
+    fn sampled(&mut self, here: &TextureFootprint, bs: BsdfSample) {
+        if self.track {
+            self.last = here.vertex.map(|v| (v, bs));
         }
     }
 }
@@ -497,7 +504,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
             result += l;
         }
         // Partial opacity: scatter here (probability `p`) or pass straight through.
-        let (scatter_pdf, shaded) = match tracer.cross(material, &si, &here.texture, rng, &mut throughput) {
+        let (scatter_pdf, shaded) = match tracer.cross(material, &si, &here, rng, &mut throughput) {
             Crossing::Scatter { pdf, shaded } => (pdf, shaded),
             Crossing::PassThrough => {
                 passes += 1;
@@ -509,9 +516,9 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
             }
         };
         passes = 0;
-        footprints.scatter_at(&here);
-        let vertex = here.texture.vertex.as_ref();
-        obs.hit(depth, &si, vertex, here.texture.var);
+        footprints.scatter_at();
+        let vertex = here.vertex.as_ref();
+        obs.hit(depth, &si, vertex, here.var);
         let ended = if shape.emitter.is_some() { Event::Emit } else { Event::Absorb };
         if depth + 1 >= path.max_depth {
             obs.event(depth, ended, 0.0, 1.0);
@@ -521,7 +528,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
             Some(s) => s,
             None => {
                 // Procedural textures are filtered to the vertex's uv footprint (a point without one).
-                let outputs = tracer.material_outputs(material, &si, &here.texture);
+                let outputs = tracer.material_outputs(material, &si, &here);
                 shade_bsdf(material, &si, &ShadeContext { uv: si.uv, outputs })
             }
         };
@@ -531,7 +538,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         let wi = si.sh.to_local(-ray.d);
 
         if n_emitters > 0 && bsdf.has_smooth() {
-            let at = (&footprints.state, vertex);
+            let at = (footprints.state(), vertex);
             if let Some(l) = tracer.direct_lighting(rng, &si, &bsdf, wi, throughput, scatter_pdf, at) {
                 result += l;
             }
