@@ -188,12 +188,13 @@ struct PrimRef {
     index: u32,
 }
 
-/// Precomputed triangle for intersection: v0 and two edges.
+/// Precomputed triangle for intersection: v0 and two edges, as 16-byte SIMD vectors (one aligned
+/// load each, where 12-byte vectors took two overlapping loads).
 #[derive(Clone, Copy, Debug)]
 struct TriPrim {
-    v0: Vec3,
-    e1: Vec3,
-    e2: Vec3,
+    v0: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
 }
 
 /// Ray queries against a scene's primitives: the seam behind which a BVH backend sits. The
@@ -231,7 +232,7 @@ pub struct PreliminaryHit {
 }
 
 #[inline]
-fn intersect_triangle(tri: &TriPrim, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<(f32, Vec2)> {
+fn intersect_triangle(tri: &TriPrim, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -> Option<(f32, Vec2)> {
     let pvec = d.cross(tri.e2);
     let det = tri.e1.dot(pvec);
     if det.abs() < 1e-20 {
@@ -333,14 +334,14 @@ impl Accel {
                         bb.extend(c.into());
                         aabbs.push(bb);
                         prims.push(PrimRef { kind: PrimKind::Triangle, shape: si as u32, index: ti as u32 });
-                        tris_unordered.push(TriPrim { v0: a, e1: b - a, e2: c - a });
+                        tris_unordered.push(TriPrim { v0: a.into(), e1: (b - a).into(), e2: (c - a).into() });
                     }
                 }
                 ShapeGeometry::Sphere { center, radius, .. } => {
                     let r = Vec3::splat(*radius);
                     aabbs.push(Aabb::new((*center - r).into(), (*center + r).into()));
                     prims.push(PrimRef { kind: PrimKind::Sphere, shape: si as u32, index: 0 });
-                    tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
+                    tris_unordered.push(TriPrim { v0: Vec3A::ZERO, e1: Vec3A::ZERO, e2: Vec3A::ZERO });
                 }
                 ShapeGeometry::Disk { to_world, .. } => {
                     // Bound the disk by its square's four corners.
@@ -350,7 +351,7 @@ impl Accel {
                     }
                     aabbs.push(padded(bb));
                     prims.push(PrimRef { kind: PrimKind::Disk, shape: si as u32, index: 0 });
-                    tris_unordered.push(TriPrim { v0: Vec3::ZERO, e1: Vec3::ZERO, e2: Vec3::ZERO });
+                    tris_unordered.push(TriPrim { v0: Vec3A::ZERO, e1: Vec3A::ZERO, e2: Vec3A::ZERO });
                 }
             }
         }
@@ -387,8 +388,8 @@ impl Accel {
         &self,
         shapes: &[Shape],
         i: usize,
-        o: Vec3,
-        d: Vec3,
+        o: Vec3A,
+        d: Vec3A,
         tmin: f32,
         tmax: f32,
     ) -> Option<(f32, Vec2)> {
@@ -396,6 +397,7 @@ impl Accel {
         if pr.kind == PrimKind::Triangle {
             return intersect_triangle(&self.tris[i], o, d, tmin, tmax);
         }
+        let (o, d) = (Vec3::from(o), Vec3::from(d));
         match &shapes[pr.shape as usize].geometry {
             ShapeGeometry::Sphere { center, radius, .. } => {
                 intersect_sphere(*center, *radius, o, d, tmin, tmax).map(|t| (t, Vec2::ZERO))
@@ -416,8 +418,9 @@ impl Intersector for Accel {
         let bray = bvh_ray(ray);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best_bary = Vec2::ZERO;
+        let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
         let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
-            match self.intersect_prim(shapes, id, ray.o, ray.d, ray.tmin, r.tmax) {
+            match self.intersect_prim(shapes, id, o, d, ray.tmin, r.tmax) {
                 Some((t, bary)) => {
                     best_bary = bary;
                     t
@@ -438,8 +441,9 @@ impl Intersector for Accel {
             return false;
         }
         let bray = bvh_ray(ray);
+        let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
         !self.bvh.ray_traverse_miss(bray, |r, id| {
-            self.intersect_prim(shapes, id, ray.o, ray.d, ray.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
+            self.intersect_prim(shapes, id, o, d, ray.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
         })
     }
 }
