@@ -1,5 +1,6 @@
 //! Errors: building a graph ([`BuildError`]) and loading a MaterialX document ([`LoadError`]).
 
+use crate::text::excerpt;
 use crate::value::ValueType;
 use std::fmt;
 use std::path::PathBuf;
@@ -8,7 +9,7 @@ use std::path::PathBuf;
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum BuildError {
     /// The category is not in the node library.
-    #[error("unknown node `{category}`; supported nodes: {supported}")]
+    #[error("unknown node `{}`; supported nodes: {supported}", excerpt(category))]
     UnknownNode {
         /// The category.
         category: String,
@@ -16,7 +17,7 @@ pub enum BuildError {
         supported: String,
     },
     /// The node exists but not with this output type.
-    #[error("node `{node}`: `{category}` has no {ty} variant")]
+    #[error("node `{}`: `{category}` has no {ty} variant", excerpt(node))]
     UnsupportedType {
         /// Node name.
         node: String,
@@ -26,7 +27,7 @@ pub enum BuildError {
         ty: ValueType,
     },
     /// An input the node does not have.
-    #[error("node `{node}` has no input `{input}`")]
+    #[error("node `{}` has no input `{}`", excerpt(node), excerpt(input))]
     UnknownInput {
         /// Node name.
         node: String,
@@ -49,7 +50,7 @@ pub enum BuildError {
         found: ValueType,
     },
     /// Two nodes or outputs with one name.
-    #[error("duplicate name `{0}`")]
+    #[error("duplicate name `{}`", excerpt(.0))]
     DuplicateName(String),
     /// The graph grew beyond [`crate::MAX_NODES`] (typically node graphs that instantiate each
     /// other many times over).
@@ -97,10 +98,10 @@ pub enum LoadErrorKind {
     #[error(transparent)]
     Build(#[from] BuildError),
     /// The nodes form a cycle.
-    #[error("cycle through node `{0}`")]
+    #[error("cycle through node `{}`", excerpt(.0))]
     Cycle(String),
     /// A connection names something that does not exist.
-    #[error("`{from}` connects to `{to}`, which does not exist")]
+    #[error("`{}` connects to `{}`, which does not exist", excerpt(from), excerpt(to))]
     Dangling {
         /// The connecting element.
         from: String,
@@ -111,7 +112,7 @@ pub enum LoadErrorKind {
     #[error("missing file `{0}`")]
     MissingFile(PathBuf),
     /// A `value` attribute that does not parse as its type.
-    #[error("malformed {ty} value `{text}`")]
+    #[error("malformed {} value `{}`", excerpt(ty), excerpt(text))]
     MalformedValue {
         /// Declared type.
         ty: String,
@@ -147,10 +148,11 @@ pub struct Unsupported {
 
 impl fmt::Display for Unsupported {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (category, node) = (excerpt(&self.category), excerpt(&self.node));
         if self.detail.is_empty() {
-            write!(f, "`{}` (node `{}`) at {}", self.category, self.node, self.location)
+            write!(f, "`{category}` (node `{node}`) at {}", self.location)
         } else {
-            write!(f, "node `{}` at {}: {}", self.node, self.location, self.detail)
+            write!(f, "node `{node}` at {}: {}", self.location, self.detail)
         }
     }
 }

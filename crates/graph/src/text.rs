@@ -59,3 +59,16 @@ mod tests {
         assert!(e.message.contains("UTF-16"), "{}", e.message);
     }
 }
+
+/// At most this many characters of a value from a file go into a message.
+pub const EXCERPT_CHARS: usize = 60;
+
+/// `s` as a message quotes it: whole when short, otherwise its first [`EXCERPT_CHARS`]
+/// characters and its length (a file may hold a value of megabytes; a message never echoes it
+/// whole).
+pub fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
+    match s.char_indices().nth(EXCERPT_CHARS) {
+        None => std::borrow::Cow::Borrowed(s),
+        Some((cut, _)) => std::borrow::Cow::Owned(format!("{}… ({} bytes)", &s[..cut], s.len())),
+    }
+}

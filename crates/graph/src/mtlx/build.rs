@@ -421,6 +421,7 @@ fn closest<'n>(name: &str, names: &[&'n str]) -> Option<&'n str> {
 /// the likely one when the name is a misspelling of it.
 fn no_such_input(category: &str, input: &str, names: &[&str]) -> String {
     let guess = closest(input, names).map_or(String::new(), |n| format!("did you mean `{n}`? "));
+    let input = crate::text::excerpt(input);
     format!("`{category}` has no input `{input}`; {guess}its inputs: {}", names.join(", "))
 }
 
@@ -452,12 +453,13 @@ const OTHER_MATERIALX_TYPES: &[&str] = &[
 /// tessera does not evaluate, or a name that is no MaterialX type at all (with the likely one).
 fn unknown_type(ty: &str) -> String {
     const VALUE_TYPES: &[&str] = &["float", "integer", "boolean", "vector2", "vector3", "vector4", "color3", "color4"];
+    let short = crate::text::excerpt(ty);
     if OTHER_MATERIALX_TYPES.contains(&ty) {
-        return format!("type `{ty}` is not one tessera evaluates (value types: {})", VALUE_TYPES.join(", "));
+        return format!("type `{short}` is not one tessera evaluates (value types: {})", VALUE_TYPES.join(", "));
     }
     let all: Vec<&str> = VALUE_TYPES.iter().chain(OTHER_MATERIALX_TYPES).copied().collect();
     let guess = closest(ty, &all).map_or(String::new(), |n| format!("; did you mean `{n}`?"));
-    format!("`{ty}` is not a MaterialX type{guess}")
+    format!("`{short}` is not a MaterialX type{guess}")
 }
 
 #[cfg(test)]

@@ -175,7 +175,13 @@ impl<'a, 'i> Importer<'a, 'i> {
                 None => NEWEST,
                 Some(s) => {
                     let v = parse_version(s).ok_or_else(|| {
-                        imp.err(root, LoadErrorKind::Structure(format!("malformed MaterialX version `{s}`")))
+                        imp.err(
+                            root,
+                            LoadErrorKind::Structure(format!(
+                                "malformed MaterialX version `{}`",
+                                crate::text::excerpt(s)
+                            )),
+                        )
                     })?;
                     if v > NEWEST {
                         return Err(imp.err(

@@ -167,3 +167,76 @@ fn misspellings_and_mismatches_name_the_element_and_the_likely_fix() {
     check(&e, &p, 6);
     assert!(e.to_string().contains("type mismatch at `g/n.texcoord`: expected vector3, found vector2"), "{e}");
 }
+
+/// A value or a name of megabytes is quoted by an excerpt and its length, never whole.
+#[test]
+fn huge_values_and_names_are_not_echoed_whole() {
+    let big = "7".repeat(5_000_000) + "x";
+    let (p, e) = load(
+        "bigvalue.mtlx",
+        &format!(
+            "<nodegraph name=\"g\">\n  <constant name=\"c\" type=\"float\">\n    \
+             <input name=\"value\" type=\"float\" value=\"{big}\"/>\n  </constant>\n</nodegraph>"
+        ),
+    );
+    check(&e, &p, 5);
+    let m = e.to_string();
+    assert!(
+        m.len() < 600 && m.contains("(5000001 bytes)") && m.contains("malformed float"),
+        "{}",
+        &m[..m.len().min(300)]
+    );
+    let name = "q".repeat(2_000_000);
+    let (p, e) = load(
+        "bigname.mtlx",
+        &format!(
+            "<nodegraph name=\"g\">\n  <texcoord name=\"t\" type=\"vector2\"/>\n  <noise2d name=\"n\" type=\"float\">\n    \
+             <input name=\"{name}\" type=\"vector2\" nodename=\"t\"/>\n  </noise2d>\n  \
+             <output name=\"out\" type=\"float\" nodename=\"n\"/>\n</nodegraph>"
+        ),
+    );
+    let m = e.to_string();
+    assert!(m.contains(&format!("{}:6:", p.display())), "{}", &m[..m.len().min(300)]);
+    assert!(m.len() < 2000 && m.contains("(2000000 bytes)"), "{}", &m[..m.len().min(300)]);
+}
+
+/// An image whose header claims 65536 × 65536 texels is refused at load without allocating it
+/// (the image decoder's memory limit), naming the node and the file.
+#[test]
+fn images_claiming_huge_sizes_are_refused() {
+    fn chunk(kind: &[u8], data: &[u8]) -> Vec<u8> {
+        let mut c = (data.len() as u32).to_be_bytes().to_vec();
+        c.extend_from_slice(kind);
+        c.extend_from_slice(data);
+        // CRC-32 of kind + data (PNG's polynomial), bit by bit.
+        let mut crc = !0u32;
+        for &b in kind.iter().chain(data) {
+            crc ^= b as u32;
+            for _ in 0..8 {
+                crc = if crc & 1 != 0 { (crc >> 1) ^ 0xedb8_8320 } else { crc >> 1 };
+            }
+        }
+        c.extend_from_slice(&(!crc).to_be_bytes());
+        c
+    }
+    let dir = std::env::temp_dir().join(format!("graph-errors-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut ihdr = 65536u32.to_be_bytes().to_vec();
+    ihdr.extend_from_slice(&65536u32.to_be_bytes());
+    ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    png.extend(chunk(b"IHDR", &ihdr));
+    png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
+    png.extend(chunk(b"IEND", &[]));
+    std::fs::write(dir.join("huge.png"), png).unwrap();
+    let (p, e) = load(
+        "hugeimage.mtlx",
+        "<nodegraph name=\"g\">\n  <image name=\"i\" type=\"color3\">\n    \
+         <input name=\"file\" type=\"filename\" value=\"huge.png\"/>\n  </image>\n  \
+         <output name=\"out\" type=\"color3\" nodename=\"i\"/>\n</nodegraph>",
+    );
+    let m = e.to_string();
+    assert!(m.starts_with(&format!("{}:4:", p.display())) && m.contains("huge.png"), "{m}");
+    // Refused by the decoder's limit from the header, not after trying to allocate 16 GiB.
+    assert!(m.contains("limit"), "{m}");
+}

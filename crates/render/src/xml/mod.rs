@@ -23,18 +23,7 @@ pub use object::{Object, Param, Value};
 pub use parser::{parse_file, parse_str, MAX_OBJECT_DEPTH, MAX_SUBSTITUTED_BYTES};
 pub(crate) use parser::{parse_file_with_includes, parse_with_includes};
 
-/// At most this many characters of a value from the scene go into a message.
-pub(crate) const EXCERPT_CHARS: usize = 60;
-
-/// `s` as a message quotes it: whole when short, otherwise its first [`EXCERPT_CHARS`]
-/// characters and its length (a scene may hold a value of megabytes; a message never echoes it
-/// whole).
-pub fn excerpt(s: &str) -> std::borrow::Cow<'_, str> {
-    match s.char_indices().nth(EXCERPT_CHARS) {
-        None => std::borrow::Cow::Borrowed(s),
-        Some((cut, _)) => std::borrow::Cow::Owned(format!("{}… ({} bytes)", &s[..cut], s.len())),
-    }
-}
+pub use graph::text::{excerpt, EXCERPT_CHARS};
 
 /// The tags that create plugin objects (besides the root `<scene>`).
 pub const OBJECT_TAGS: &[&str] = &[
