@@ -557,3 +557,112 @@ fn outputs_follow_links_write_through_special_files_and_are_checked_first() {
     }
     assert!(seen, "three renders finished before their write phase was seen");
 }
+
+/// Runs `tessera args` in `dir` and returns its exit status, stderr and peak resident memory
+/// in MiB (the child's own, from `wait4`, not this test process's).
+fn run_with_peak_memory(args: &[&str], dir: &Path) -> (std::process::ExitStatus, String, f64) {
+    use std::io::Read;
+    use std::os::unix::process::ExitStatusExt;
+    let mut child = tessera()
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = child.stderr.take().unwrap();
+    let reader = std::thread::spawn(move || {
+        let mut s = String::new();
+        stderr.read_to_string(&mut s).unwrap();
+        s
+    });
+    let mut status = 0;
+    // SAFETY: an all-zero rusage is a valid value for wait4 to overwrite.
+    let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: waits for our own child; `status` and `usage` outlive the call.
+    let pid = unsafe { libc::wait4(child.id() as libc::pid_t, &mut status, 0, &mut usage) };
+    assert_eq!(pid, child.id() as libc::pid_t, "wait4 failed");
+    let err = reader.join().unwrap();
+    (std::process::ExitStatus::from_raw(status), err, usage.ru_maxrss as f64 / 1024.0)
+}
+
+/// Inputs built to blow up memory are refused (or loaded) within a bounded footprint, each
+/// measured as the process's peak memory: before their limits, defaults that multiply took
+/// 15 GB, nested node graphs 5 GB and a 30 000-node chain 1.8 GB.
+#[test]
+fn inputs_built_to_exhaust_memory_stay_small() {
+    let dir = temp_dir("memory");
+    // The XML "billion laughs": nine levels of ten, a 10^10-byte value.
+    let mut laughs = String::from("<scene version=\"3.0.0\">\n<default name=\"v0\" value=\"xxxxxxxxxx\"/>\n");
+    for i in 1..10 {
+        laughs += &format!("<default name=\"v{i}\" value=\"{}\"/>\n", format!("$v{}", i - 1).repeat(10));
+    }
+    laughs += "<shape type=\"sphere\"><string name=\"x\" value=\"$v9\"/></shape>\n</scene>\n";
+    std::fs::write(dir.join("laughs.xml"), laughs).unwrap();
+    // 100 000 shapes nested in each other.
+    let n = 100_000;
+    std::fs::write(
+        dir.join("deep.xml"),
+        format!("<scene version=\"3.0.0\">\n{}{}</scene>\n", "<shape type=\"sphere\">".repeat(n), "</shape>".repeat(n)),
+    )
+    .unwrap();
+    // Node graphs used as node implementations, each level using the previous ten times (10^8
+    // nodes at eight levels).
+    let mut multiply = String::from(
+        "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n\
+         <nodedef name=\"ND_l0\" node=\"l0\"><output name=\"out\" type=\"float\"/></nodedef>\n\
+         <nodegraph name=\"NG_l0\" nodedef=\"ND_l0\"><constant name=\"c\" type=\"float\">\
+         <input name=\"value\" type=\"float\" value=\"1\"/></constant><output name=\"out\" type=\"float\" nodename=\"c\"/></nodegraph>\n",
+    );
+    for l in 1..=8 {
+        multiply +=
+            &format!("<nodedef name=\"ND_l{l}\" node=\"l{l}\"><output name=\"out\" type=\"float\"/></nodedef>\n");
+        multiply += &format!("<nodegraph name=\"NG_l{l}\" nodedef=\"ND_l{l}\">");
+        for k in 0..10 {
+            multiply += &format!("<l{} name=\"a{k}\" type=\"float\"/>", l - 1);
+        }
+        let mut prev = "a0".to_string();
+        for k in 1..10 {
+            multiply += &format!(
+                "<add name=\"s{k}\" type=\"float\"><input name=\"in1\" type=\"float\" nodename=\"{prev}\"/>\
+                 <input name=\"in2\" type=\"float\" nodename=\"a{k}\"/></add>"
+            );
+            prev = format!("s{k}");
+        }
+        multiply += &format!("<output name=\"out\" type=\"float\" nodename=\"{prev}\"/></nodegraph>\n");
+    }
+    multiply += "<nodegraph name=\"g\"><l8 name=\"top\" type=\"float\"/><output name=\"out\" type=\"float\" nodename=\"top\"/></nodegraph>\n</materialx>\n";
+    std::fs::write(dir.join("multiply.mtlx"), multiply).unwrap();
+    // A legal chain of 30 000 additions: loads and bakes.
+    let mut chain = String::from(
+        "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n<nodegraph name=\"g\">\n\
+         <constant name=\"a0\" type=\"float\"><input name=\"value\" type=\"float\" value=\"0\"/></constant>\n",
+    );
+    for i in 1..30_000 {
+        chain += &format!(
+            "<add name=\"a{i}\" type=\"float\"><input name=\"in1\" type=\"float\" nodename=\"a{}\"/>\
+             <input name=\"in2\" type=\"float\" value=\"0.00001\"/></add>\n",
+            i - 1
+        );
+    }
+    chain += "<output name=\"out\" type=\"float\" nodename=\"a29999\"/>\n</nodegraph>\n</materialx>\n";
+    std::fs::write(dir.join("chain.mtlx"), chain).unwrap();
+
+    fn bake(doc: &str) -> Vec<&str> {
+        vec!["bake", doc, "--element", "g/out", "--res", "4", "--out", "b.exr", "--quiet"]
+    }
+    let cases: Vec<(Vec<&str>, bool, &str)> = vec![
+        (vec!["render", "laughs.xml", "--out", "x.exr"], false, "grows beyond 1 MiB"),
+        (vec!["render", "deep.xml", "--out", "x.exr"], false, "objects deep"),
+        (bake("multiply.mtlx"), false, "65536"),
+        (bake("chain.mtlx"), true, ""),
+    ];
+    for (args, ok, needle) in cases {
+        let (status, err, peak_mib) = run_with_peak_memory(&args, &dir);
+        println!("{args:?}: peak {peak_mib:.0} MiB");
+        assert_eq!(status.success(), ok, "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(err.replace(' ', "").contains(&needle.replace(' ', "")), "{args:?}: stderr lacks '{needle}': {err}");
+        assert!(peak_mib < 400.0, "{args:?} peaked at {peak_mib:.0} MiB");
+    }
+}
