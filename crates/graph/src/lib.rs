@@ -88,6 +88,12 @@ pub mod value;
 /// nodes (5 GB, more than 30 s) before there was a limit.
 pub const MAX_NODES: usize = 1 << 16;
 
+/// How deep node graphs used as node implementations may nest in each other (a node whose
+/// definition's graph holds a node whose definition's graph holds …): far beyond the few levels
+/// real libraries use. A chain of 20 000 such definitions (a linear number of nodes) took over
+/// 24 GB in qualified names before there was a limit.
+pub const MAX_INSTANCE_DEPTH: usize = 64;
+
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 pub use eval::{

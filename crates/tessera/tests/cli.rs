@@ -588,7 +588,8 @@ fn run_with_peak_memory(args: &[&str], dir: &Path) -> (std::process::ExitStatus,
 
 /// Inputs built to blow up memory are refused (or loaded) within a bounded footprint, each
 /// measured as the process's peak memory: before their limits, defaults that multiply took
-/// 15 GB, nested node graphs 5 GB and a 30 000-node chain 1.8 GB.
+/// 15 GB, nested node graphs 5 GB, a 30 000-node chain 1.8 GB and a chain of 20 000 node
+/// definitions over 24 GB.
 #[test]
 fn inputs_built_to_exhaust_memory_stay_small() {
     let dir = temp_dir("memory");
@@ -647,6 +648,23 @@ fn inputs_built_to_exhaust_memory_stay_small() {
     }
     chain += "<output name=\"out\" type=\"float\" nodename=\"a29999\"/>\n</nodegraph>\n</materialx>\n";
     std::fs::write(dir.join("chain.mtlx"), chain).unwrap();
+    // 20 000 node definitions, each implemented by a graph holding one node of the one before.
+    let mut defs = String::from(
+        "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n\
+         <nodedef name=\"ND_d0\" node=\"d0\"><output name=\"out\" type=\"float\"/></nodedef>\n\
+         <nodegraph name=\"NG_d0\" nodedef=\"ND_d0\"><constant name=\"c\" type=\"float\">\
+         <input name=\"value\" type=\"float\" value=\"1\"/></constant><output name=\"out\" type=\"float\" nodename=\"c\"/></nodegraph>\n",
+    );
+    for l in 1..20_000 {
+        defs += &format!(
+            "<nodedef name=\"ND_d{l}\" node=\"d{l}\"><output name=\"out\" type=\"float\"/></nodedef>\n\
+             <nodegraph name=\"NG_d{l}\" nodedef=\"ND_d{l}\"><d{} name=\"a\" type=\"float\"/>\
+             <output name=\"out\" type=\"float\" nodename=\"a\"/></nodegraph>\n",
+            l - 1
+        );
+    }
+    defs += "<nodegraph name=\"g\"><d19999 name=\"top\" type=\"float\"/><output name=\"out\" type=\"float\" nodename=\"top\"/></nodegraph>\n</materialx>\n";
+    std::fs::write(dir.join("defs.mtlx"), defs).unwrap();
 
     fn bake(doc: &str) -> Vec<&str> {
         vec!["bake", doc, "--element", "g/out", "--res", "4", "--out", "b.exr", "--quiet"]
@@ -656,6 +674,7 @@ fn inputs_built_to_exhaust_memory_stay_small() {
         (vec!["render", "deep.xml", "--out", "x.exr"], false, "objects deep"),
         (bake("multiply.mtlx"), false, "65536"),
         (bake("chain.mtlx"), true, ""),
+        (bake("defs.mtlx"), false, "nested more than 64 deep"),
     ];
     for (args, ok, needle) in cases {
         let (status, err, peak_mib) = run_with_peak_memory(&args, &dir);

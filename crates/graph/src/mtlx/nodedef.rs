@@ -179,21 +179,38 @@ impl<'a, 'i> Importer<'a, 'i> {
         let inst = match self.instances.get(q) {
             Some(&s) => s,
             None => {
-                // A definition that instantiates itself never ends.
+                // A definition that instantiates itself never ends; one nested too deep in
+                // others is refused before its names (which grow with the depth) and the walks
+                // up this chain make loading quadratic.
                 let mut p = Some(scope);
+                let mut depth = 0;
                 while let Some(s) = p {
                     if let Iface::Def { nodedef, .. } = self.scopes[s].iface {
                         if nodedef == k {
                             return Err(self.hard(
                                 el,
                                 LoadErrorKind::Structure(format!(
-                                    "node `{q}` instantiates `{}` inside its own definition (recursive nodedef)",
+                                    "node `{}` instantiates `{}` inside its own definition (recursive nodedef)",
+                                    crate::text::excerpt(q),
                                     self.nodedefs[k].name
                                 )),
                             ));
                         }
+                        depth += 1;
                     }
                     p = self.scopes[s].parent;
+                }
+                if depth >= crate::MAX_INSTANCE_DEPTH {
+                    return Err(self.hard(
+                        el,
+                        LoadErrorKind::Structure(format!(
+                            "node `{}` (`{}`) is implemented by a node graph nested more than {} deep in \
+                             other nodes' implementations",
+                            crate::text::excerpt(q),
+                            self.nodedefs[k].name,
+                            crate::MAX_INSTANCE_DEPTH
+                        )),
+                    ));
                 }
                 let gname = self.impls[self.nodedefs[k].name];
                 let Some(&g) = self.graph_elems.get(gname) else {
