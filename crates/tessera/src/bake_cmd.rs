@@ -71,6 +71,8 @@ pub(crate) struct Baked {
     pub ty: graph::ValueType,
     pub threads: usize,
     pub seconds: f64,
+    /// The document's load warnings (nodes that load but cannot do what it asks).
+    pub warnings: Vec<String>,
 }
 
 impl BakeJob {
@@ -96,7 +98,7 @@ impl BakeJob {
             rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
         let t = Instant::now();
         let image = pool.install(|| bake::bake(doc.graph(), &source, ty, &settings))?;
-        Ok(Baked { image, ty, threads, seconds: t.elapsed().as_secs_f64() })
+        Ok(Baked { image, ty, threads, seconds: t.elapsed().as_secs_f64(), warnings: doc.graph().warnings() })
     }
 }
 
@@ -112,7 +114,11 @@ fn parse_uv(s: &str) -> Result<Vec2, String> {
 /// Runs `tessera bake`.
 pub fn run(args: BakeArgs) -> Result<()> {
     let format = render::film::check_image_output(&args.out)?;
-    let Baked { image: img, ty, threads, seconds: bake_s } = args.bake.run()?;
+    let Baked { image: img, ty, threads, seconds: bake_s, warnings } = args.bake.run()?;
+    // Never quiet, as with renders.
+    for w in &warnings {
+        eprintln!("warning: {}: {w}", args.bake.document.display());
+    }
     let bytes = match format {
         render::film::ImageFormat::Exr => encode_exr(&img)?,
         render::film::ImageFormat::Png => encode_png(&img)?,

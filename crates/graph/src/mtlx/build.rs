@@ -319,7 +319,13 @@ impl<'a, 'i> Importer<'a, 'i> {
                 };
                 let value = src.attribute("value").unwrap_or("").to_string();
                 if inp.attribute("type") == Some("filename") || src.attribute("type") == Some("filename") {
-                    let path = self.resolve_file(src, &value)?;
+                    // An empty file name names no file: the node decides (an image gives its
+                    // default, as in MaterialX).
+                    let path = if value.trim().is_empty() {
+                        std::path::PathBuf::new()
+                    } else {
+                        self.resolve_file(src, &value)?
+                    };
                     // Only colour images are colour managed (as in MaterialX).
                     let mut colorspace = String::new();
                     if matches!(ValueType::from_name(tyname), Some(ValueType::Color3 | ValueType::Color4)) {

@@ -140,6 +140,9 @@ fn build(_: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[Param])
     let Some((path, srgb)) = file else {
         return Err("no image file".into());
     };
+    if path.as_os_str().is_empty() {
+        return Ok(Op::Default("its `file` is empty: it gives its `default`".into()));
+    }
     Ok(Op::HexTile(Arc::new(HexTile { tex: Texture::periodic(path, srgb)? })))
 }
 

@@ -246,6 +246,9 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[
     let Some((path, srgb)) = file else {
         return Err("no image file".into());
     };
+    if path.as_os_str().is_empty() {
+        return Ok(Op::Default("its `file` is empty: it gives its `default`".into()));
+    }
     let tiled = category == "tiledimage";
     if tiled {
         (u, v) = (Address::Periodic, Address::Periodic);

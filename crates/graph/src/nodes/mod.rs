@@ -64,7 +64,9 @@ pub enum Param {
 pub enum InType {
     /// Same type as the node's output.
     Out,
-    /// Same as the output, or a float broadcast to every channel.
+    /// Same as the output or, for a colour output, the vector of as many channels (MaterialX
+    /// defines noise amplitudes of colour noise as vectors: `ND_noise3d_color3` takes a
+    /// `vector3`), or a float broadcast to every channel.
     OutOrFloat,
     /// `float`.
     Float,
@@ -128,6 +130,15 @@ macro_rules! inp {
 }
 pub(crate) use inp;
 
+/// The vector type with as many channels as colour type `ty` (none for other types).
+fn vector_like(ty: ValueType) -> Option<ValueType> {
+    match ty {
+        ValueType::Color3 => Some(ValueType::Vector3),
+        ValueType::Color4 => Some(ValueType::Vector4),
+        _ => None,
+    }
+}
+
 impl InputSpec {
     fn concrete_type(&self, node_ty: ValueType, earlier: &[ValueType]) -> ValueType {
         match self.ty {
@@ -169,7 +180,7 @@ impl InputSpec {
         use ValueType::*;
         match self.ty {
             InType::Out => found == node_ty,
-            InType::OutOrFloat => found == node_ty || found == Float,
+            InType::OutOrFloat => found == node_ty || found == Float || Some(found) == vector_like(node_ty),
             InType::Float => found == Float,
             InType::Int => found == Integer,
             InType::Bool => found == Boolean,
@@ -191,7 +202,10 @@ impl InputSpec {
     pub fn expected(&self, node_ty: ValueType) -> String {
         match self.ty {
             InType::Out => node_ty.name().to_string(),
-            InType::OutOrFloat => format!("{node_ty} or float"),
+            InType::OutOrFloat => match vector_like(node_ty) {
+                Some(v) => format!("{v}, {node_ty} or float"),
+                None => format!("{node_ty} or float"),
+            },
             InType::Scalar => "float, integer or boolean".into(),
             InType::Any => "any".into(),
             InType::SameAs(_) => "the type of the first input".into(),
@@ -243,6 +257,9 @@ pub enum Op {
     Image(Arc<image::Texture>),
     /// `hextiledimage`.
     HexTile(Arc<hextile::HexTile>),
+    /// A node that evaluates its `default` input (its first), as MaterialX's image nodes do
+    /// when their `file` is empty; the text says why, as a load warning.
+    Default(String),
 }
 
 /// Per-evaluation context handed to nodes.
@@ -269,6 +286,7 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Image(t) => image::eval(t, ty, ins, ctx),
         Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
+        Op::Default(_) => ins[0],
     };
     if ctx.point {
         for c in out.ch.iter_mut() {
@@ -306,6 +324,7 @@ pub(crate) fn reads_geometry(op: &Op) -> bool {
 pub(crate) fn warning(op: &Op) -> Option<String> {
     match op {
         Op::Geometry(g) => geometry::warning(g),
+        Op::Default(why) => Some(why.clone()),
         _ => None,
     }
 }

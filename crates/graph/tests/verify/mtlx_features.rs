@@ -723,3 +723,45 @@ fn bad_matrices_are_clear_errors() {
     let LoadErrorKind::Unsupported { items, .. } = &e.kind else { panic!("{e}") };
     assert!(items[0].detail.contains("`in1` varies over the surface"), "{e}");
 }
+
+/// MaterialX's own signatures: an image node whose `file` is empty gives its `default` (with a
+/// warning naming the node) instead of failing the document, and colour noise takes a vector
+/// amplitude of as many channels (`ND_noise3d_color3`, `ND_noise2d_color4`, `ND_fractal2d_color3`),
+/// which scales each channel as a colour amplitude of the same values does.
+#[test]
+fn empty_image_files_and_vector_amplitudes_follow_materialx() {
+    let text = doc(
+        "1.39",
+        r#"<nodegraph name="g">
+  <image name="i" type="color3">
+    <input name="file" type="filename" value=""/>
+    <input name="default" type="color3" value="0.2, 0.4, 0.6"/>
+  </image>
+  <output name="img" type="color3" nodename="i"/>
+  <texcoord name="t" type="vector2"/>
+  <multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="5, 5"/></multiply>
+  <noise2d name="nv" type="color4"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector4" value="1, 0.5, 0.25, 2"/></noise2d>
+  <noise2d name="nc" type="color4"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="color4" value="1, 0.5, 0.25, 2"/></noise2d>
+  <output name="nv" type="color4" nodename="nv"/>
+  <output name="nc" type="color4" nodename="nc"/>
+  <fractal2d name="fv" type="color3"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector3" value="1, 0.5, 0.25"/></fractal2d>
+  <fractal2d name="f1" type="color3"><input name="texcoord" type="vector2" nodename="s"/></fractal2d>
+  <output name="fv" type="color3" nodename="fv"/>
+  <output name="f1" type="color3" nodename="f1"/>
+  <noise3d name="n3" type="color3"><input name="amplitude" type="vector3" value="1, 0.5, 0.25"/></noise3d>
+  <output name="n3" type="color3" nodename="n3"/>
+</nodegraph>"#,
+    );
+    let d = Document::parse(&text, Path::new("sig.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let w = d.graph().warnings();
+    assert!(w.iter().any(|w| w.contains("`g/i`") && w.contains("`file` is empty")), "{w:?}");
+    for uv in [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.9, 0.44)] {
+        assert_eq!(eval(&d, "g/img", uv), vec![0.2, 0.4, 0.6]);
+        assert_eq!(eval(&d, "g/nv", uv), eval(&d, "g/nc", uv));
+        let (fv, f1) = (eval(&d, "g/fv", uv), eval(&d, "g/f1", uv));
+        for (k, a) in [1.0f32, 0.5, 0.25].iter().enumerate() {
+            assert!((fv[k] - a * f1[k]).abs() < 1e-6, "channel {k}: {} vs {} × {}", fv[k], a, f1[k]);
+        }
+        assert_eq!(eval(&d, "g/n3", uv).len(), 3);
+    }
+}
