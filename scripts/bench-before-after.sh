@@ -9,6 +9,7 @@
 # over the free-texture lower bound (each measured within its own run, so machine drift between
 # the two runs cancels) and the image error against each binary's own supersampled reference.
 # Example: scripts/bench-before-after.sh fbe6b0c /tmp/ba --res 128 --spp 16 --repeats 2
+# BEFORE_BIN=PATH uses an already built binary of REV instead of building it.
 set -euo pipefail
 rev=${1:?usage: bench-before-after.sh REV OUT [bench options]}
 out=${2:?usage: bench-before-after.sh REV OUT [bench options]}
@@ -16,12 +17,16 @@ shift 2
 repo=$(cd "$(dirname "$0")/.." && pwd)
 mkdir -p "$out"
 out=$(cd "$out" && pwd)
-if [ ! -d "$out/before-src" ]; then
-    git -C "$repo" worktree add --detach "$out/before-src" "$rev" >/dev/null
+before_bin=${BEFORE_BIN:-}
+if [ -z "$before_bin" ]; then
+    if [ ! -d "$out/before-src" ]; then
+        git -C "$repo" worktree add --detach "$out/before-src" "$rev" >/dev/null
+    fi
+    (cd "$out/before-src" && CARGO_TARGET_DIR="$out/before-target" cargo build --release -p tessera)
+    before_bin="$out/before-target/release/tessera"
 fi
-(cd "$out/before-src" && CARGO_TARGET_DIR="$out/before-target" cargo build --release -p tessera)
 (cd "$repo" && cargo build --release -p tessera)
-"$out/before-target/release/tessera" bench "$repo/scenes" --out "$out/before" --ref-cache "$out/refs-before" "$@"
+"$before_bin" bench "$repo/scenes" --out "$out/before" --ref-cache "$out/refs-before" "$@"
 "$repo/target/release/tessera" bench "$repo/scenes" --out "$out/after" --ref-cache "$out/refs-after" "$@"
 python3 - "$out" "$rev" <<'EOF'
 import json, sys

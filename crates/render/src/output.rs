@@ -110,8 +110,6 @@ pub fn check_output(path: &Path) -> Result<()> {
             let _ = std::fs::remove_file(&probe);
             Ok(())
         }
-        // Left by a process that was killed: writable all the same.
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => Ok(()),
         Err(e) => Err(Error::in_file(path, format!("cannot write in the folder {}: {e}", dir.display()))),
     }
 }
@@ -123,23 +121,28 @@ fn folder_of(p: &Path) -> &Path {
     }
 }
 
+/// A number no other temporary file of this process has (two outputs staged for one target
+/// must not share a temporary file).
+fn next_temp_number() -> u64 {
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    NEXT.fetch_add(1, Ordering::Relaxed)
+}
+
 /// The temporary file beside `path`: its name, cut short enough that the temporary name itself
-/// is a legal file name whenever `path`'s is, then the process id.
+/// is a legal file name whenever `path`'s is, then the process id and a serial number.
 fn temp_beside(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let mut cut = name.len().min(MAX_FILE_NAME_BYTES - 32);
+    let mut cut = name.len().min(MAX_FILE_NAME_BYTES - 40);
     while !name.is_char_boundary(cut) {
         cut -= 1;
     }
-    path.with_file_name(format!(".{}.{}.tmp", &name[..cut], std::process::id()))
+    path.with_file_name(format!(".{}.{}.{}.tmp", &name[..cut], std::process::id(), next_temp_number()))
 }
 
 /// A temporary file for a special target, in the system's temporary folder (a device's own
 /// folder, such as /dev, takes no new files).
 fn temp_elsewhere() -> PathBuf {
-    static NEXT: AtomicU64 = AtomicU64::new(0);
-    let n = NEXT.fetch_add(1, Ordering::Relaxed);
-    std::env::temp_dir().join(format!(".tessera.{}.{n}.tmp", std::process::id()))
+    std::env::temp_dir().join(format!(".tessera.{}.{}.tmp", std::process::id(), next_temp_number()))
 }
 
 /// Temporary files that exist now: written or being written, not yet renamed or removed.
@@ -154,7 +157,7 @@ fn forget(tmp: &Path) {
 }
 
 /// Removes every temporary file this process is writing or has staged. For a signal handler:
-/// an interrupted run leaves no `.NAME.PID.tmp` behind (the final files are untouched).
+/// an interrupted run leaves no `.NAME.PID.N.tmp` behind (the final files are untouched).
 pub fn remove_temporaries() {
     for p in live().drain(..) {
         let _ = std::fs::remove_file(p);

@@ -512,6 +512,11 @@ fn outputs_follow_links_write_through_special_files_and_are_checked_first() {
     );
     expect_failure(&with(&long, &["--out", "."]), &dir, &["is a folder"]);
     expect_failure(&with(&long, &["--out", "y.exr", "--stats-json", "."]), &dir, &["is a folder"]);
+    expect_failure(
+        &with(&long, &["--out", "y.exr", "--stats-json", "./y.exr"]),
+        &dir,
+        &["two of the render's outputs"],
+    );
     assert!(!dir.join("y.exr").exists());
 
     // Interrupted while writing (a large image, its PNG and its footprint AOV take a while to
