@@ -422,3 +422,26 @@ fn defaults_that_multiply_are_refused() {
     let e = render::loader::load_file(&path, &[]).err().expect("a value of 10 GB").to_string();
     assert!(e.contains("laughs.xml:8:") && e.contains("grows beyond 1 MiB"), "{e}");
 }
+
+/// Mitsuba's checkerboard scaled by 1e30 through `to_uv` (every texel far below a pixel, and uv
+/// values whose fractions f32 no longer holds) renders finite pixels, none of them NaN, and no
+/// sample is dropped as non-finite.
+#[test]
+fn checkerboard_scaled_by_1e30_renders_finite() {
+    let path = dir().join("checker_1e30.xml");
+    std::fs::write(
+        &path,
+        format!(
+            "<scene version=\"3.0.0\">\n{SENSOR}\n<emitter type=\"constant\"/>\n\
+             <shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture type=\"checkerboard\" name=\"reflectance\">\
+             <transform name=\"to_uv\"><scale value=\"1e30\"/></transform></texture></bsdf></shape>\n</scene>\n"
+        ),
+    )
+    .unwrap();
+    let scene = render::loader::load_file(&path, &[]).unwrap();
+    let out = render::integrator::render(&scene, render::integrator::RenderSettings::new(4, 1), &|_| {});
+    assert_eq!(out.counts.nonfinite_samples, 0);
+    for p in &out.image.pixels {
+        assert!(p.is_finite() && p.min_element() >= 0.0, "pixel {p}");
+    }
+}
