@@ -152,9 +152,9 @@ impl BufRead for LineReader<'_> {
     }
 }
 
-/// Finds the first face line with an out-of-range index of kind `slot` (0: position, 1:
-/// texture coordinate, 2: normal), for errors `tobj` reports without a line.
-fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
+/// Finds the first face line with an out-of-range index of one of the kinds `slots` (0:
+/// position, 1: texture coordinate, 2: normal), for errors `tobj` reports without a line.
+fn locate_bad_face_index(text: &str, slots: &[usize]) -> Option<(u32, String)> {
     let mut counts = [0i64; 3];
     for (ln, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
@@ -164,16 +164,18 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
             Some("vn") => counts[2] += 1,
             Some("f") => {
                 for corner in words {
-                    let Some(part) = corner.split('/').nth(slot) else { continue };
-                    let Ok(x) = part.parse::<i64>() else { continue };
-                    let count = counts[slot];
-                    let resolved = if x < 0 { count + x } else { x - 1 };
-                    if resolved < 0 || resolved >= count {
-                        let kind = ["vertex (v)", "texture coordinate (vt)", "normal (vn)"][slot];
-                        return Some((
-                            ln as u32 + 1,
-                            format!("face refers to {kind} {x}, but only {count} are defined before this line"),
-                        ));
+                    for &slot in slots {
+                        let Some(part) = corner.split('/').nth(slot) else { continue };
+                        let Ok(x) = part.parse::<i64>() else { continue };
+                        let count = counts[slot];
+                        let resolved = if x < 0 { count + x } else { x - 1 };
+                        if resolved < 0 || resolved >= count {
+                            let kind = ["vertex (v)", "texture coordinate (vt)", "normal (vn)"][slot];
+                            return Some((
+                                ln as u32 + 1,
+                                format!("face refers to {kind} {x}, but only {count} are defined before this line"),
+                            ));
+                        }
                     }
                 }
             }
@@ -188,6 +190,19 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
 /// merged; materials are ignored. `flip_tex_coords` maps v to 1 − v (Mitsuba's default for OBJ).
 pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
     let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot read OBJ file: {e}")))?;
+    // Face indices are checked before `tobj` sees them: it turns an out-of-range one (a relative
+    // index before the first element, or a huge one) into an offset that overflows, which panics
+    // where overflow checks are on (tests, fuzzing) instead of returning its error. Like `tobj`,
+    // vt and vn indices are ignored in a file that defines no vt or vn.
+    let text = String::from_utf8_lossy(&bytes);
+    let defines = |kw: &str| text.lines().any(|l| l.split_whitespace().next() == Some(kw));
+    let slots: Vec<usize> = [(0, true), (1, defines("vt")), (2, defines("vn"))]
+        .into_iter()
+        .filter_map(|(slot, checked)| checked.then_some(slot))
+        .collect();
+    if let Some((line, msg)) = locate_bad_face_index(&text, &slots) {
+        return Err(Error::at(&Loc::new(std::sync::Arc::new(path.to_path_buf()), line, 0), msg));
+    }
     let mut reader = LineReader { data: &bytes, pos: 0, line_start: 0 };
     // tobj's other fields depend on its cargo features, hence the (possibly no-op) update.
     #[allow(clippy::needless_update)]
@@ -261,7 +276,7 @@ fn obj_error(path: &Path, bytes: &[u8], reader: &LineReader, e: tobj::LoadError)
     let file = std::sync::Arc::new(path.to_path_buf());
     if let Some(slot) = slot {
         let text = String::from_utf8_lossy(bytes);
-        return match locate_bad_face_index(&text, slot) {
+        return match locate_bad_face_index(&text, &[slot]) {
             Some((line, msg)) => Error::at(&Loc::new(file, line, 0), msg),
             None => Error::in_file(path, format!("invalid OBJ file: {e}")),
         };
@@ -561,6 +576,22 @@ mod tests {
         assert!(e.contains("bad_vt.obj:5") && e.contains("texture coordinate"), "{e}");
         let e = load_obj(Path::new("/nonexistent/x.obj"), true).unwrap_err().to_string();
         assert!(e.contains("/nonexistent/x.obj") && e.contains("cannot read"), "{e}");
+    }
+
+    /// Found by fuzzing (fuzz/fuzz_targets/obj.rs): a relative texture-coordinate index before the
+    /// first one (-3 of 1) overflowed in `tobj`'s offset arithmetic, a panic where overflow
+    /// checks are on; so did a huge normal index. Both are now errors naming the line.
+    #[test]
+    fn mesh_obj_fuzz_out_of_range_relative_indices_are_errors() {
+        let p = temp_file("fuzz_vt.obj", b"v 0 0 0\nv 1 0 0\nvt 1 1\nf 2/-3/-2 2 2");
+        let e = load_obj(&p, true).unwrap_err().to_string();
+        assert!(e.contains("fuzz_vt.obj:4") && e.contains("texture coordinate (vt) -3"), "{e}");
+        let p = temp_file("fuzz_vn.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//7000000000000000000\n");
+        let e = load_obj(&p, true).unwrap_err().to_string();
+        assert!(e.contains("fuzz_vn.obj:5") && e.contains("normal (vn) 7000000000000000000"), "{e}");
+        // Without any vt (vn), their indices are ignored, as before.
+        let p = temp_file("no_vt.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/9 2/9 3/9\n");
+        assert_eq!(load_obj(&p, true).unwrap().indices.len(), 1);
     }
 
     #[test]
