@@ -31,11 +31,12 @@ pub struct TriangleMesh {
 }
 
 impl TriangleMesh {
-    /// Checks the mesh read from `path` and removes degenerate (zero-area) triangles.
+    /// Checks the mesh read from `path` and removes degenerate (zero-area) triangles and
+    /// triangles that repeat an earlier one (the same three vertices in the same winding order).
     ///
     /// Errors: no triangles, attribute counts that differ from the position count, an index out
     /// of range, a NaN/infinite position, normal or uv, or only degenerate triangles. Returns
-    /// warnings (at most one, describing the removed degenerate triangles).
+    /// warnings (at most one for the removed degenerate triangles and one for the repeats).
     pub fn validate(&mut self, path: &Path) -> Result<Vec<String>> {
         let n = self.positions.len();
         if self.indices.is_empty() {
@@ -79,6 +80,11 @@ impl TriangleMesh {
         let total = self.indices.len();
         let mut first: Option<(usize, [u32; 3])> = None;
         let mut removed = 0usize;
+        // Repeated faces draw nothing new, but a few dozen copies of one made the BVH a chain
+        // deeper than its traversal walks (found by fuzzing; see `Accel::build`).
+        let mut seen = std::collections::HashSet::with_capacity(total);
+        let mut first_repeat: Option<(usize, [u32; 3])> = None;
+        let mut repeats = 0usize;
         let positions = &self.positions;
         let mut t = 0usize;
         self.indices.retain(|tri| {
@@ -88,8 +94,15 @@ impl TriangleMesh {
                 removed += 1;
                 first.get_or_insert((t, *tri));
             }
+            // The same triangle whichever corner comes first, as long as the winding is kept.
+            let r = (0..3).min_by_key(|&k| tri[k]).unwrap_or(0);
+            let repeated = !degenerate && !seen.insert([tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3]]);
+            if repeated {
+                repeats += 1;
+                first_repeat.get_or_insert((t, *tri));
+            }
             t += 1;
-            !degenerate
+            !degenerate && !repeated
         });
         let mut warnings = Vec::new();
         if let Some((t, tri)) = first {
@@ -101,6 +114,15 @@ impl TriangleMesh {
             }
             warnings.push(format!(
                 "{}: removed {removed} of {total} triangles with zero area; the first is triangle {t} (vertices {}, {}, {})",
+                path.display(),
+                tri[0],
+                tri[1],
+                tri[2]
+            ));
+        }
+        if let Some((t, tri)) = first_repeat {
+            warnings.push(format!(
+                "{}: removed {repeats} of {total} triangles that repeat an earlier one; the first is triangle {t} (vertices {}, {}, {})",
                 path.display(),
                 tri[0],
                 tri[1],
@@ -608,6 +630,25 @@ mod tests {
         let mut m = load_obj(&p, true).unwrap();
         let e = m.validate(&p).unwrap_err().to_string();
         assert!(e.contains("empty.obj") && e.contains("no triangles"), "{e}");
+    }
+
+    /// Found by fuzzing (fuzz/fuzz_targets/obj.rs): 42 copies of one quad made the BVH a chain
+    /// deeper than its traversal walks (an assertion in obvhs's debug builds; in release builds
+    /// rays skipped nodes). A triangle that repeats an earlier one, whichever corner it starts
+    /// from, is removed with a warning; the same corners wound the other way are kept.
+    #[test]
+    fn mesh_validate_removes_repeated_triangles() {
+        let p = PathBuf::from("mem.obj");
+        let mut m = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE],
+            normals: None,
+            uvs: None,
+            indices: [vec![[0, 1, 2]; 40], vec![[1, 2, 0], [2, 0, 1], [0, 2, 1], [1, 3, 2]]].concat(),
+        };
+        let w = m.validate(&p).unwrap();
+        assert_eq!(m.indices, vec![[0, 1, 2], [0, 2, 1], [1, 3, 2]]);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("mem.obj") && w[0].contains("removed 41 of 44") && w[0].contains("triangle 1"), "{w:?}");
     }
 
     #[test]
