@@ -308,6 +308,27 @@ impl Profile {
             if let Some(t) = s.tiles.iter().find(|t| i32::from(t.level) > max) {
                 return Err(bad(format!("streams[{si}]: tiles at level {} beyond max_level {max}", t.level)));
             }
+            // The model adds a level's touch counts (and the requests) as integers.
+            if s.requests.iter().try_fold(0u64, |n, r| n.checked_add(r.requests)).is_none() {
+                return Err(bad(format!("streams[{si}]: the requests add up to more than 2^64")));
+            }
+            let mut touches = vec![0u64; usize::from(c.max_level) + 1];
+            for lt in &s.tiles {
+                if let Some(t) = lt.tiles.iter().find(|t| t[2] < 0 || t[3] < 0) {
+                    return Err(bad(format!(
+                        "streams[{si}]: a tile at level {} has a negative touch count ({}, {})",
+                        lt.level, t[2], t[3]
+                    )));
+                }
+                let sum = &mut touches[usize::from(lt.level)];
+                *sum = lt
+                    .tiles
+                    .iter()
+                    .try_fold(*sum, |n, t| n.checked_add(t[2] as u64)?.checked_add(t[3] as u64))
+                    .ok_or_else(|| {
+                        bad(format!("streams[{si}]: the touch counts at level {} add up to more than 2^64", lt.level))
+                    })?;
+            }
         }
         Ok(())
     }

@@ -318,9 +318,43 @@ fn padded(bb: Aabb) -> Aabb {
     Aabb::new(bb.min - pad, bb.max + pad)
 }
 
+/// The deepest BVH (levels below the root) the traversal walks: its stack holds 32 node groups
+/// and, when full, overwrites its top, so a deeper tree loses nodes and rays miss what they hit.
+pub const MAX_BVH_DEPTH: u32 = 31;
+
+/// `obvhs::cwbvh::builder::build_cwbvh` (PLOC, reinsertion, the 8-wide conversion) without its
+/// debug-build validation, which asserts on a tree deeper than [`MAX_BVH_DEPTH`] where
+/// [`Accel::build`] returns an error.
+fn build_cwbvh(aabbs: &[Aabb]) -> obvhs::cwbvh::CwBvh {
+    let config = obvhs::BvhBuildParams::slow_build();
+    let mut bvh2 = obvhs::ploc::PlocBuilder::with_capacity(aabbs.len()).build(
+        config.ploc_search_distance,
+        aabbs,
+        (0..aabbs.len() as u32).collect::<Vec<_>>(),
+        config.sort_precision,
+        config.search_depth_threshold,
+    );
+    obvhs::bvh2::reinsertion::ReinsertionOptimizer::default().run(&mut bvh2, config.reinsertion_batch_ratio, None);
+    obvhs::cwbvh::bvh2_to_cwbvh::bvh2_to_cwbvh(&bvh2, config.max_prims_per_leaf.clamp(1, 3), true, false)
+}
+
+/// The levels below the root of `bvh`'s deepest node (a node's internal children are
+/// `child_base_idx ..` in order, one per set bit of `imask`).
+fn bvh_depth(bvh: &obvhs::cwbvh::CwBvh) -> u32 {
+    let mut deepest = 0;
+    let mut stack = if bvh.nodes.is_empty() { Vec::new() } else { vec![(0usize, 0u32)] };
+    while let Some((i, depth)) = stack.pop() {
+        deepest = deepest.max(depth);
+        let node = &bvh.nodes[i];
+        stack.extend((0..node.imask.count_ones() as usize).map(|k| (node.child_base_idx as usize + k, depth + 1)));
+    }
+    deepest
+}
+
 impl Accel {
-    /// Builds the BVH over every primitive of `shapes`.
-    pub fn build(shapes: &[Shape]) -> Self {
+    /// Builds the BVH over every primitive of `shapes`; an error (a message) when it is deeper
+    /// than the traversal walks ([`MAX_BVH_DEPTH`]).
+    pub fn build(shapes: &[Shape]) -> std::result::Result<Self, String> {
         let mut aabbs = Vec::new();
         let mut prims = Vec::new();
         let mut tris_unordered = Vec::new();
@@ -359,15 +393,14 @@ impl Accel {
         for bb in &aabbs {
             bounds = bounds.union(bb);
         }
-        let bvh = if aabbs.is_empty() {
-            obvhs::cwbvh::CwBvh::default()
-        } else {
-            obvhs::cwbvh::builder::build_cwbvh(
-                &aabbs,
-                obvhs::BvhBuildParams::slow_build(),
-                &mut std::time::Duration::default(),
-            )
-        };
+        let bvh = if aabbs.is_empty() { obvhs::cwbvh::CwBvh::default() } else { build_cwbvh(&aabbs) };
+        let depth = bvh_depth(&bvh);
+        if depth > MAX_BVH_DEPTH {
+            return Err(format!(
+                "the scene's {} primitives make a BVH {depth} levels deep, more than the {MAX_BVH_DEPTH} its traversal walks; are many of them on top of one another (a mesh's faces repeated, say)?",
+                aabbs.len()
+            ));
+        }
         // Reorder primitives to BVH leaf order so traversal reads them sequentially.
         let (prims, tris) = if aabbs.is_empty() {
             (prims, tris_unordered)
@@ -380,7 +413,7 @@ impl Accel {
         };
         let (bounds_min, bounds_max) =
             if aabbs.is_empty() { (Vec3::ZERO, Vec3::ZERO) } else { (Vec3::from(bounds.min), Vec3::from(bounds.max)) };
-        Accel { bvh, prims, tris, bounds_min, bounds_max }
+        Ok(Accel { bvh, prims, tris, bounds_min, bounds_max })
     }
 
     #[inline]
@@ -665,7 +698,7 @@ mod tests {
     #[test]
     fn quad_hit_has_mitsuba_uv_and_derivatives() {
         let shapes = vec![mesh_shape(quad())];
-        let accel = Accel::build(&shapes);
+        let accel = Accel::build(&shapes).unwrap();
         let ray = Ray::new(Vec3::new(0.5, -0.5, 3.0), -Vec3::Z);
         let hit = accel.intersect(&shapes, &ray).expect("hit");
         assert!((hit.t - 3.0).abs() < 1e-5);
@@ -691,7 +724,7 @@ mod tests {
             face_normals: false,
             name: "s".into(),
         }];
-        let accel = Accel::build(&shapes);
+        let accel = Accel::build(&shapes).unwrap();
         let ray = Ray::new(Vec3::new(0.5, 0.3, 5.0), Vec3::new(-0.05, -0.05, -1.0).normalize());
         let hit = accel.intersect(&shapes, &ray).unwrap();
         let si = interaction(&shapes, &ray, &hit);
@@ -719,7 +752,7 @@ mod tests {
             Vec3::new(-0.2, 0.4, 1.0).normalize(),
         ]);
         let shapes = vec![mesh_shape(mesh)];
-        let accel = Accel::build(&shapes);
+        let accel = Accel::build(&shapes).unwrap();
         let normal_at = |x: f32, y: f32| {
             let ray = Ray::new(Vec3::new(x, y, 2.0), -Vec3::Z);
             let hit = accel.intersect(&shapes, &ray).unwrap();
@@ -743,7 +776,7 @@ mod tests {
             face_normals: false,
             name: "d".into(),
         }];
-        let accel = Accel::build(&shapes);
+        let accel = Accel::build(&shapes).unwrap();
         let ray = Ray::new(Vec3::new(0.0, 1.0, 1.0), -Vec3::Z);
         let si = interaction(&shapes, &ray, &accel.intersect(&shapes, &ray).unwrap());
         assert!((si.uv - Vec2::new(0.5, 0.25)).length() < 1e-5, "{:?}", si.uv);

@@ -51,7 +51,8 @@
 //! triangles, an index out of range, a different number of normals or texture coordinates than
 //! positions, or a NaN or infinite position, normal or texture coordinate. Triangles with
 //! exactly zero area in the file's coordinates are removed, with one warning on standard error;
-//! if every triangle has zero area, that is an error. Positions are transformed by `to_world`,
+//! if every triangle has zero area, that is an error. Triangles that repeat an earlier one (the
+//! same three vertices, wound the same way) are removed too, with one warning. Positions are transformed by `to_world`,
 //! and normals by its inverse transpose and then renormalised. A mesh whose area in the world
 //! is zero or not finite is an error ("shape has zero surface area").
 //!
@@ -288,7 +289,8 @@ impl Builder {
             // Mitsuba renders black without lights; so do we, but say so.
             eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
         }
-        let accel: Box<dyn crate::geometry::Intersector> = Box::new(Accel::build(&self.shapes));
+        let accel: Box<dyn crate::geometry::Intersector> =
+            Box::new(Accel::build(&self.shapes).map_err(|e| root.error(e))?);
         let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
         let masked = self.materials.iter().any(|m| m.bsdf.is_masked());
         for (k, mg) in self.materials.iter_mut().flat_map(|m| m.graphs.iter_mut()).enumerate() {

@@ -31,11 +31,12 @@ pub struct TriangleMesh {
 }
 
 impl TriangleMesh {
-    /// Checks the mesh read from `path` and removes degenerate (zero-area) triangles.
+    /// Checks the mesh read from `path` and removes degenerate (zero-area) triangles and
+    /// triangles that repeat an earlier one (the same three vertices in the same winding order).
     ///
     /// Errors: no triangles, attribute counts that differ from the position count, an index out
     /// of range, a NaN/infinite position, normal or uv, or only degenerate triangles. Returns
-    /// warnings (at most one, describing the removed degenerate triangles).
+    /// warnings (at most one for the removed degenerate triangles and one for the repeats).
     pub fn validate(&mut self, path: &Path) -> Result<Vec<String>> {
         let n = self.positions.len();
         if self.indices.is_empty() {
@@ -79,6 +80,11 @@ impl TriangleMesh {
         let total = self.indices.len();
         let mut first: Option<(usize, [u32; 3])> = None;
         let mut removed = 0usize;
+        // Repeated faces draw nothing new, but a few dozen copies of one made the BVH a chain
+        // deeper than its traversal walks (found by fuzzing; see `Accel::build`).
+        let mut seen = std::collections::HashSet::with_capacity(total);
+        let mut first_repeat: Option<(usize, [u32; 3])> = None;
+        let mut repeats = 0usize;
         let positions = &self.positions;
         let mut t = 0usize;
         self.indices.retain(|tri| {
@@ -88,8 +94,15 @@ impl TriangleMesh {
                 removed += 1;
                 first.get_or_insert((t, *tri));
             }
+            // The same triangle whichever corner comes first, as long as the winding is kept.
+            let r = (0..3).min_by_key(|&k| tri[k]).unwrap_or(0);
+            let repeated = !degenerate && !seen.insert([tri[r], tri[(r + 1) % 3], tri[(r + 2) % 3]]);
+            if repeated {
+                repeats += 1;
+                first_repeat.get_or_insert((t, *tri));
+            }
             t += 1;
-            !degenerate
+            !degenerate && !repeated
         });
         let mut warnings = Vec::new();
         if let Some((t, tri)) = first {
@@ -101,6 +114,15 @@ impl TriangleMesh {
             }
             warnings.push(format!(
                 "{}: removed {removed} of {total} triangles with zero area; the first is triangle {t} (vertices {}, {}, {})",
+                path.display(),
+                tri[0],
+                tri[1],
+                tri[2]
+            ));
+        }
+        if let Some((t, tri)) = first_repeat {
+            warnings.push(format!(
+                "{}: removed {repeats} of {total} triangles that repeat an earlier one; the first is triangle {t} (vertices {}, {}, {})",
                 path.display(),
                 tri[0],
                 tri[1],
@@ -152,9 +174,9 @@ impl BufRead for LineReader<'_> {
     }
 }
 
-/// Finds the first face line with an out-of-range index of kind `slot` (0: position, 1:
-/// texture coordinate, 2: normal), for errors `tobj` reports without a line.
-fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
+/// Finds the first face line with an out-of-range index of one of the kinds `slots` (0:
+/// position, 1: texture coordinate, 2: normal), for errors `tobj` reports without a line.
+fn locate_bad_face_index(text: &str, slots: &[usize]) -> Option<(u32, String)> {
     let mut counts = [0i64; 3];
     for (ln, line) in text.lines().enumerate() {
         let mut words = line.split_whitespace();
@@ -164,16 +186,18 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
             Some("vn") => counts[2] += 1,
             Some("f") => {
                 for corner in words {
-                    let Some(part) = corner.split('/').nth(slot) else { continue };
-                    let Ok(x) = part.parse::<i64>() else { continue };
-                    let count = counts[slot];
-                    let resolved = if x < 0 { count + x } else { x - 1 };
-                    if resolved < 0 || resolved >= count {
-                        let kind = ["vertex (v)", "texture coordinate (vt)", "normal (vn)"][slot];
-                        return Some((
-                            ln as u32 + 1,
-                            format!("face refers to {kind} {x}, but only {count} are defined before this line"),
-                        ));
+                    for &slot in slots {
+                        let Some(part) = corner.split('/').nth(slot) else { continue };
+                        let Ok(x) = part.parse::<i64>() else { continue };
+                        let count = counts[slot];
+                        let resolved = if x < 0 { count + x } else { x - 1 };
+                        if resolved < 0 || resolved >= count {
+                            let kind = ["vertex (v)", "texture coordinate (vt)", "normal (vn)"][slot];
+                            return Some((
+                                ln as u32 + 1,
+                                format!("face refers to {kind} {x}, but only {count} are defined before this line"),
+                            ));
+                        }
                     }
                 }
             }
@@ -188,6 +212,19 @@ fn locate_bad_face_index(text: &str, slot: usize) -> Option<(u32, String)> {
 /// merged; materials are ignored. `flip_tex_coords` maps v to 1 − v (Mitsuba's default for OBJ).
 pub fn load_obj(path: &Path, flip_tex_coords: bool) -> Result<TriangleMesh> {
     let bytes = std::fs::read(path).map_err(|e| Error::in_file(path, format!("cannot read OBJ file: {e}")))?;
+    // Face indices are checked before `tobj` sees them: it turns an out-of-range one (a relative
+    // index before the first element, or a huge one) into an offset that overflows, which panics
+    // where overflow checks are on (tests, fuzzing) instead of returning its error. Like `tobj`,
+    // vt and vn indices are ignored in a file that defines no vt or vn.
+    let text = String::from_utf8_lossy(&bytes);
+    let defines = |kw: &str| text.lines().any(|l| l.split_whitespace().next() == Some(kw));
+    let slots: Vec<usize> = [(0, true), (1, defines("vt")), (2, defines("vn"))]
+        .into_iter()
+        .filter_map(|(slot, checked)| checked.then_some(slot))
+        .collect();
+    if let Some((line, msg)) = locate_bad_face_index(&text, &slots) {
+        return Err(Error::at(&Loc::new(std::sync::Arc::new(path.to_path_buf()), line, 0), msg));
+    }
     let mut reader = LineReader { data: &bytes, pos: 0, line_start: 0 };
     // tobj's other fields depend on its cargo features, hence the (possibly no-op) update.
     #[allow(clippy::needless_update)]
@@ -261,7 +298,7 @@ fn obj_error(path: &Path, bytes: &[u8], reader: &LineReader, e: tobj::LoadError)
     let file = std::sync::Arc::new(path.to_path_buf());
     if let Some(slot) = slot {
         let text = String::from_utf8_lossy(bytes);
-        return match locate_bad_face_index(&text, slot) {
+        return match locate_bad_face_index(&text, &[slot]) {
             Some((line, msg)) => Error::at(&Loc::new(file, line, 0), msg),
             None => Error::in_file(path, format!("invalid OBJ file: {e}")),
         };
@@ -563,6 +600,22 @@ mod tests {
         assert!(e.contains("/nonexistent/x.obj") && e.contains("cannot read"), "{e}");
     }
 
+    /// Found by fuzzing (fuzz/fuzz_targets/obj.rs): a relative texture-coordinate index before the
+    /// first one (-3 of 1) overflowed in `tobj`'s offset arithmetic, a panic where overflow
+    /// checks are on; so did a huge normal index. Both are now errors naming the line.
+    #[test]
+    fn mesh_obj_fuzz_out_of_range_relative_indices_are_errors() {
+        let p = temp_file("fuzz_vt.obj", b"v 0 0 0\nv 1 0 0\nvt 1 1\nf 2/-3/-2 2 2");
+        let e = load_obj(&p, true).unwrap_err().to_string();
+        assert!(e.contains("fuzz_vt.obj:4") && e.contains("texture coordinate (vt) -3"), "{e}");
+        let p = temp_file("fuzz_vn.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//7000000000000000000\n");
+        let e = load_obj(&p, true).unwrap_err().to_string();
+        assert!(e.contains("fuzz_vn.obj:5") && e.contains("normal (vn) 7000000000000000000"), "{e}");
+        // Without any vt (vn), their indices are ignored, as before.
+        let p = temp_file("no_vt.obj", b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1/9 2/9 3/9\n");
+        assert_eq!(load_obj(&p, true).unwrap().indices.len(), 1);
+    }
+
     #[test]
     fn mesh_nan_and_empty_errors() {
         let p = temp_file("nan.obj", b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n");
@@ -577,6 +630,25 @@ mod tests {
         let mut m = load_obj(&p, true).unwrap();
         let e = m.validate(&p).unwrap_err().to_string();
         assert!(e.contains("empty.obj") && e.contains("no triangles"), "{e}");
+    }
+
+    /// Found by fuzzing (fuzz/fuzz_targets/obj.rs): 42 copies of one quad made the BVH a chain
+    /// deeper than its traversal walks (an assertion in obvhs's debug builds; in release builds
+    /// rays skipped nodes). A triangle that repeats an earlier one, whichever corner it starts
+    /// from, is removed with a warning; the same corners wound the other way are kept.
+    #[test]
+    fn mesh_validate_removes_repeated_triangles() {
+        let p = PathBuf::from("mem.obj");
+        let mut m = TriangleMesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::ONE],
+            normals: None,
+            uvs: None,
+            indices: [vec![[0, 1, 2]; 40], vec![[1, 2, 0], [2, 0, 1], [0, 2, 1], [1, 3, 2]]].concat(),
+        };
+        let w = m.validate(&p).unwrap();
+        assert_eq!(m.indices, vec![[0, 1, 2], [0, 2, 1], [1, 3, 2]]);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert!(w[0].contains("mem.obj") && w[0].contains("removed 41 of 44") && w[0].contains("triangle 1"), "{w:?}");
     }
 
     #[test]

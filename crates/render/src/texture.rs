@@ -10,6 +10,13 @@ use std::sync::Arc;
 /// the header before any pixel is decoded.
 pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
 
+/// The largest EXR block (a run of scan lines, or a tile) decoded without checking that the
+/// file is large enough to hold it ([`MAX_EXR_EXPANSION`]).
+const MAX_EXR_BLOCK_BYTES: u64 = 64 << 20;
+
+/// More than any EXR compression expands data: deflate's limit is about 1032:1.
+const MAX_EXR_EXPANSION: u64 = 2048;
+
 /// How a bitmap treats uv outside [0, 1).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum WrapMode {
@@ -92,28 +99,57 @@ impl Bitmap {
         // The header first: a few bytes may claim any size, and decoding allocates it.
         let meta = exr::meta::MetaData::read_from_file(path, false)
             .map_err(|e| crate::error::Error::in_file(path, format!("cannot read EXR: {e}")))?;
-        for h in &meta.headers {
-            let (w, h) = (h.layer_size.width() as u64, h.layer_size.height() as u64);
+        let file_bytes = std::fs::metadata(path).map_or(u64::MAX, |m| m.len());
+        for header in &meta.headers {
+            let (w, h) = (header.layer_size.width() as u64, header.layer_size.height() as u64);
             if w.saturating_mul(h) > MAX_IMAGE_PIXELS {
                 return Err(crate::error::Error::in_file(
                     path,
                     format!("EXR image of {w}×{h} pixels exceeds the limit of {MAX_IMAGE_PIXELS} pixels"),
                 ));
             }
+            // The decoder sizes and fills a buffer for each block (a run of scan lines, or a
+            // tile) from the header before it reads the block: a header of a few bytes may
+            // claim blocks of gigabytes (a line 8 million pixels wide in 32-line PIZ blocks is
+            // 2 GB). A block's data is in the file, compressed at most about 1032:1 (deflate's
+            // limit; EXR's other methods compress less), so a block over 64 MiB needs a file of
+            // at least 1/2048 of its size.
+            let block_pixels = match header.blocks {
+                exr::meta::BlockDescription::ScanLines => {
+                    (header.compression.scan_lines_per_block() as u64).saturating_mul(w)
+                }
+                exr::meta::BlockDescription::Tiles(t) => {
+                    (t.tile_size.width() as u64).saturating_mul(t.tile_size.height() as u64)
+                }
+            };
+            let block_bytes = block_pixels.saturating_mul(header.channels.bytes_per_pixel as u64);
+            if block_bytes > MAX_EXR_BLOCK_BYTES && block_bytes / MAX_EXR_EXPANSION > file_bytes {
+                return Err(crate::error::Error::in_file(
+                    path,
+                    format!(
+                        "EXR header claims blocks of {} MiB ({w}×{h} pixels), more than a file of {file_bytes} bytes can hold: the file is truncated or its header is corrupt",
+                        block_bytes >> 20
+                    ),
+                ));
+            }
         }
+        // The pixels as plain float triples, whose zeroed allocation the system commits only
+        // as the decoder writes them: a header under the limit may still claim 2^28 pixels
+        // (3 GiB) that the file does not hold, and filling them with `Vec3::ZERO` up front took
+        // that memory and seconds before the missing data was noticed.
         let image = read_first_rgba_layer_from_file(
             path,
             |res, _| {
                 let (w, h) = (res.width(), res.height());
-                (w, h, vec![Vec3::ZERO; w * h])
+                (w, h, vec![[0.0f32; 3]; w * h])
             },
-            |(w, _, px): &mut (usize, usize, Vec<Vec3>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-                px[pos.y() * *w + pos.x()] = Vec3::new(r, g, b);
+            |(w, _, px): &mut (usize, usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+                px[pos.y() * *w + pos.x()] = [r, g, b];
             },
         )
         .map_err(|e| crate::error::Error::in_file(path, format!("cannot read EXR: {e}")))?;
         let (width, height, texels) = image.layer_data.channel_data.pixels;
-        Ok(Bitmap { width, height, texels })
+        Ok(Bitmap { width, height, texels: texels.into_iter().map(Vec3::from).collect() })
     }
 
     #[inline]
@@ -272,6 +308,81 @@ mod tests {
         // Halfway between the last and (wrapped) first texel.
         assert!((b.bilinear(Vec2::new(1.0, 0.5), WrapMode::Repeat).x - 0.5).abs() < 1e-6);
         assert_eq!(b.bilinear(Vec2::new(1.0, 0.5), WrapMode::Clamp), Vec3::ONE);
+    }
+
+    /// An EXR header: half-float channels B, G, R (type 1, linear 0, sampling 1 × 1),
+    /// `compression` (4: PIZ), data and display windows (0, 0)..(w − 1, h − 1), then `tail`.
+    fn exr_with_header(compression: u8, w: i32, h: i32, tail: &[u8]) -> Vec<u8> {
+        let attr = |name: &str, ty: &str, value: &[u8]| {
+            [name.as_bytes(), b"\0", ty.as_bytes(), b"\0", &(value.len() as i32).to_le_bytes(), value].concat()
+        };
+        let one = 1i32.to_le_bytes();
+        let channels: Vec<u8> = ["B", "G", "R"]
+            .iter()
+            .flat_map(|c| [c.as_bytes(), b"\0", &one, &[0, 0, 0, 0], &one, &one].concat())
+            .chain([0])
+            .collect();
+        let window: Vec<u8> = [0, 0, w - 1, h - 1].iter().flat_map(|v: &i32| v.to_le_bytes()).collect();
+        [
+            &[0x76, 0x2f, 0x31, 0x01, 2, 0, 0, 0][..],
+            &attr("channels", "chlist", &channels),
+            &attr("compression", "compression", &[compression]),
+            &attr("dataWindow", "box2i", &window),
+            &attr("displayWindow", "box2i", &window),
+            &[0],
+            tail,
+        ]
+        .concat()
+    }
+
+    /// Loads `file` (written as `name`) and returns the error and how much the process's peak
+    /// resident memory grew meanwhile (0 where /proc/self/status is not there).
+    fn exr_load_error(name: &str, file: &[u8]) -> (String, u64) {
+        let dir = std::env::temp_dir().join(format!("tessera_texture_tests_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, file).unwrap();
+        let before = peak_rss_bytes();
+        let e = Bitmap::load(&path, false).err().expect("a bad EXR must be refused").to_string();
+        let grew = match (before, peak_rss_bytes()) {
+            (Some(a), Some(b)) => b.saturating_sub(a),
+            _ => 0,
+        };
+        (e, grew)
+    }
+
+    /// The process's peak resident memory in bytes (Linux), for tests that bound an allocation.
+    fn peak_rss_bytes() -> Option<u64> {
+        let status = std::fs::read_to_string("/proc/self/status").ok()?;
+        let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+        Some(line.split_whitespace().nth(1)?.parse::<u64>().ok()? * 1024)
+    }
+
+    /// Found by fuzzing (fuzz/fuzz_targets/exr.rs): an EXR header of 2^28 pixels (at the limit)
+    /// with no pixel data after it is an error, as it was, but it no longer fills 3 GiB of
+    /// texels first (1.4 s and 3 GiB resident, for a file of 150 bytes).
+    #[test]
+    fn exr_header_without_data_is_an_error_without_a_huge_allocation() {
+        let (e, grew) = exr_load_error("fuzz_no_data.exr", &exr_with_header(4, 16384, 16384, &[]));
+        assert!(e.contains("fuzz_no_data.exr") && e.contains("cannot read EXR"), "{e}");
+        assert!(grew < 1 << 30, "refusing it took {} MiB more memory", grew >> 20);
+    }
+
+    /// Found by fuzzing: a line 8 323 200 pixels wide, in PIZ blocks of 32 lines (1.6 GB for
+    /// three half channels), whose one block claims 1.3 GB made the decoder fill a 1.3 GB buffer
+    /// before it found the file short (214 bytes). Such blocks are now refused from the header.
+    #[test]
+    fn exr_blocks_larger_than_the_file_can_hold_are_refused() {
+        let header_len = exr_with_header(4, 8_323_200, 1, &[]).len() as u64;
+        // The offset table (one block, right after it), the block's y and claimed size, 8 bytes.
+        let tail =
+            [&(header_len + 8).to_le_bytes()[..], &0i32.to_le_bytes(), &0x5000_0000i32.to_le_bytes(), &[0; 8]].concat();
+        let (e, grew) = exr_load_error("fuzz_huge_block.exr", &exr_with_header(4, 8_323_200, 1, &tail));
+        assert!(e.contains("fuzz_huge_block.exr") && e.contains("more than a file of"), "{e}");
+        assert!(grew < 1 << 30, "refusing it took {} MiB more memory", grew >> 20);
+        // A block under 64 MiB is decoded (and found short) as before.
+        let (e, _) = exr_load_error("short_block.exr", &exr_with_header(4, 4096, 1, &tail));
+        assert!(e.contains("cannot read EXR"), "{e}");
     }
 
     #[test]

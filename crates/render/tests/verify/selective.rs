@@ -229,6 +229,39 @@ fn bad_profiles_and_plans_are_rejected() {
     assert!(plan::search(&model, SearchOptions::with_budget(f64::NAN)).is_err());
 }
 
+/// Found by fuzzing (fuzz/fuzz_targets/profile_json.rs): a tile's touch counts are `i64` in the
+/// file and the model adds them (and the requests) as `u64`: a negative count (read as nearly
+/// 2^64) or a few huge ones overflowed, a panic where overflow checks are on and a nonsense
+/// prediction elsewhere. The profile is now refused, naming the stream and level.
+#[test]
+fn profile_counts_that_overflow_are_rejected() {
+    let scene = scene("marble.xml", 16);
+    let profile = take_profile(&scene, 1.0, 1);
+    let (si, li) = profile
+        .streams
+        .iter()
+        .enumerate()
+        .find_map(|(si, s)| s.tiles.iter().position(|lt| !lt.tiles.is_empty()).map(|li| (si, li)))
+        .expect("the profile has tiles");
+    let level = profile.streams[si].tiles[li].level;
+    let mut p = profile.clone();
+    p.streams[si].tiles[li].tiles[0][2] = -1;
+    let e = Profile::from_json(&p.to_json()).unwrap_err().to_string();
+    assert!(e.contains(&format!("streams[{si}]")) && e.contains("negative touch count"), "{e}");
+    let mut p = profile.clone();
+    p.streams[si].tiles[li].tiles.extend([[0, 0, i64::MAX, 0]; 3]);
+    let e = Profile::from_json(&p.to_json()).unwrap_err().to_string();
+    assert!(e.contains(&format!("touch counts at level {level} add up to more than 2^64")), "{e}");
+    let mut p = profile.clone();
+    let requests = &mut p.streams[si].requests;
+    if let Some(first) = requests.first().cloned() {
+        requests.push(first);
+    }
+    requests.iter_mut().for_each(|r| r.requests = u64::MAX);
+    let e = Profile::from_json(&p.to_json()).unwrap_err().to_string();
+    assert!(e.contains("requests add up to more than 2^64"), "{e}");
+}
+
 /// Profiles and plan files edited by hand or by other tools: numbers replaced by negative,
 /// huge, zero or fractional ones, and bytes dropped. Each loads with an error, or loads and is
 /// predicted and planned for (and read back as a plan) without a panic; cases are named by seed.
