@@ -343,7 +343,7 @@ mod tests {
         let path = dir.join(name);
         std::fs::write(&path, file).unwrap();
         let before = peak_rss_bytes();
-        let e = Bitmap::load(&path, false).err().expect("a bad EXR must be refused").to_string();
+        let e = Bitmap::load(&path, false).expect_err("a bad EXR must be refused").to_string();
         let grew = match (before, peak_rss_bytes()) {
             (Some(a), Some(b)) => b.saturating_sub(a),
             _ => 0,
