@@ -114,6 +114,16 @@ pub fn check_output(path: &Path) -> Result<()> {
     }
 }
 
+/// The file an output names, as an absolute path with its links followed (its folder's, when
+/// the file does not exist yet): two outputs, or an output and an input, are one file exactly
+/// when these are equal.
+pub fn resolved(path: &Path) -> PathBuf {
+    path.canonicalize()
+        .ok()
+        .or_else(|| Some(folder_of(path).canonicalize().ok()?.join(path.file_name()?)))
+        .unwrap_or_else(|| path.to_path_buf())
+}
+
 fn folder_of(p: &Path) -> &Path {
     match p.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,

@@ -389,33 +389,21 @@ impl<'a> RenderJob<'a> {
         if let Some(o) = &args.report {
             render::film::check_file_name(o)?;
         }
-        // Each output once: two outputs naming one file would each replace the other.
-        // (Compared as absolute paths with links resolved: the folders exist, checked above.)
-        let identity = |p: &PathBuf| -> PathBuf {
-            p.canonicalize()
-                .ok()
-                .or_else(|| {
-                    let dir = p.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
-                    Some(dir.canonicalize().ok()?.join(p.file_name()?))
-                })
-                .unwrap_or_else(|| p.clone())
-        };
+        // Each output once (two outputs naming one file would each replace the other), and never
+        // what the render reads: an --out naming one of the scene's textures would destroy it
+        // (and change the next render). Compared as absolute paths with links resolved.
+        let inputs: Vec<PathBuf> = scene.files.iter().filter_map(|f| f.canonicalize().ok()).collect();
         let named: Vec<(&PathBuf, PathBuf)> =
-            outputs.iter().chain(&args.stats_json).map(|p| (p, identity(p))).collect();
+            outputs.iter().chain(&args.stats_json).map(|p| (p, render::output::resolved(p))).collect();
         for (i, (o, id)) in named.iter().enumerate() {
             if named[..i].iter().any(|(_, earlier)| earlier == id) {
                 bail!("{}: given as two of the render's outputs; name each output once", o.display());
             }
-        }
-        // Never overwrite what the render reads: an --out naming one of the scene's textures
-        // would destroy it (and change the next render).
-        let inputs: Vec<PathBuf> = scene.files.iter().filter_map(|f| f.canonicalize().ok()).collect();
-        for o in outputs.iter().chain(&args.stats_json) {
-            if let Some(input) = o.canonicalize().ok().filter(|c| inputs.contains(c)) {
+            if inputs.contains(id) {
                 bail!(
                     "{}: is one of the scene's input files ({}); write the output elsewhere",
                     o.display(),
-                    input.display()
+                    id.display()
                 );
             }
         }

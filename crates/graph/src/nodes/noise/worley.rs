@@ -157,7 +157,8 @@ impl FeatureCells {
     /// The block whose lower corner is one cell below the lowest node's cell (in f32, as the
     /// nodes' cells are found).
     fn around(p: DVec2, s: DVec2) -> FeatureCells {
-        let reach = 2.86 * s;
+        // The outermost node of the widest rule.
+        let reach = gaussian::HERMITE5[4].0 * s;
         let lo = (p - reach).as_vec2();
         FeatureCells {
             x0: ifloor(lo.x).wrapping_sub(2),
