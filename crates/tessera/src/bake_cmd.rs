@@ -90,7 +90,7 @@ impl BakeJob {
         settings.validate()?;
         // Lenient: nodes the element does not need may be unsupported; if it needs one,
         // resolving it reports which (with their lines).
-        let opts = LoadOptions { search_paths: self.search_paths.clone(), lenient: true };
+        let opts = LoadOptions { search_paths: self.search_paths.clone(), lenient: true, ..LoadOptions::default() };
         let doc = Document::load_with(&self.document, &opts)?;
         let (source, ty) = bake::resolve(&doc, &self.element).with_context(|| self.document.display().to_string())?;
         let threads = self.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

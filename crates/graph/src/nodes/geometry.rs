@@ -1,5 +1,5 @@
 //! Coordinates, geometry and constants: `texcoord`, `position`, `normal`, `tangent`,
-//! `bitangent`, `geompropvalue`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
+//! `bitangent`, `geompropvalue`, `geomcolor`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
 //! `transformpoint`, `transformvector`, `transformnormal`, `transformmatrix`, `dot`.
 //!
 //! | node | inputs (default) | filtered evaluation |
@@ -9,6 +9,7 @@
 //! | `normal` | `space` (`object`) | mean `N`, gradients from `∂N/∂u`, `∂N/∂v`, variance as `position` |
 //! | `tangent`, `bitangent` | `space` (`object`), `index` (0) | the frame vector at the centre, zero spread (its variation across a footprint is not tracked) |
 //! | `geompropvalue` | `geomprop` (string), `default` (0) | uv sets (`UV0`, `uv`, `st`, `texcoord`, …) as `texcoord`; `P`/`position`/`Pobject`/`Pworld`, `N`/`normal`/…, `tangent`/…, `bitangent`/… (vector3) as those nodes; any other name (or type) gives `default`, with a warning |
+//! | `geomcolor` (float, color3, color4) | `index` (0) | 0, with a warning: tessera's shapes carry no vertex colours |
 //! | `constant` | `value` (0) | exact, zero spread |
 //! | `place2d` | `texcoord` (UV0), `pivot` (0,0), `scale` (1,1), `rotate` (0°), `offset` (0,0), `operationorder` (0 = SRT) | affine in `texcoord`: exact when the other inputs are uniform, cubature otherwise |
 //! | `rotate2d` | `in` (0,0), `amount` (0°) | linear: exact for uniform `amount` |
@@ -46,6 +47,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "tangent",
     "bitangent",
     "geompropvalue",
+    "geomcolor",
     "constant",
     "place2d",
     "rotate2d",
@@ -68,6 +70,8 @@ pub enum GeometryOp {
     PropUv,
     /// `geompropvalue` that tessera cannot provide: its `default`, and why.
     PropDefault(String),
+    /// A property with no default that tessera's shapes do not carry (`geomcolor`): 0, and why.
+    Absent(String),
     /// `rotate3d`
     Rotate3d,
     /// `transformpoint`, `transformvector` (identity between tessera's spaces).
@@ -100,6 +104,9 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "position" | "normal" => (&[], &["space"], v3),
         "tangent" | "bitangent" => (&[inp!("index", Int, Zero)], &["space"], v3),
         "geompropvalue" => (&[inp!("default", Out, Zero)], &["geomprop"], types::numeric),
+        "geomcolor" => (&[inp!("index", Int, Zero)], &[], |t| {
+            matches!(t, ValueType::Float | ValueType::Color3 | ValueType::Color4)
+        }),
         "constant" => (&[inp!("value", Out, Zero)], &[], types::numeric),
         "place2d" => (
             &[
@@ -201,6 +208,12 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
                 )),
             }
         }
+        "geomcolor" => {
+            let index = constant_index(&srcs[0])?;
+            GeometryOp::Absent(format!(
+                "vertex colour set {index} is not carried by tessera's shapes; `geomcolor` gives 0"
+            ))
+        }
         "transformmatrix" => {
             let dim = ty.channels();
             let mat = params
@@ -245,7 +258,7 @@ pub(crate) fn reads_geometry(op: &GeometryOp) -> bool {
 pub(crate) fn warning(op: &GeometryOp) -> Option<String> {
     match op {
         GeometryOp::Texcoord(w) => w.clone(),
-        GeometryOp::PropDefault(w) => Some(w.clone()),
+        GeometryOp::PropDefault(w) | GeometryOp::Absent(w) => Some(w.clone()),
         _ => None,
     }
 }
@@ -301,6 +314,7 @@ pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut C
         }
         GeometryOp::Prop(p) => geomprop(*p, ctx),
         GeometryOp::PropDefault(_) => ins[0],
+        GeometryOp::Absent(_) => Filtered::zero(ty),
         GeometryOp::Identity => ins[0],
         GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
         GeometryOp::Rotate3d => rotate3d(ins, ctx),

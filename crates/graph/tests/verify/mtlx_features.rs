@@ -305,7 +305,7 @@ fn file_prefixes_and_colour_spaces() {
     <output name="grey" type="float" nodename="grey" />
     <output name="k" type="color3" nodename="k" />
   </nodegraph>"#;
-    let opts = LoadOptions { search_paths: vec![images.clone()], lenient: false };
+    let opts = LoadOptions { search_paths: vec![images.clone()], ..LoadOptions::default() };
     let p = write(&d, "colour.mtlx", &doc("1.39", body));
     let lin = Document::load_with(&p, &opts).unwrap();
     let srgb = |x: f32| if x <= 0.04045 { x / 12.92 } else { ((x + 0.055) / 1.055).powf(2.4) };
@@ -764,4 +764,58 @@ fn empty_image_files_and_vector_amplitudes_follow_materialx() {
         }
         assert_eq!(eval(&d, "g/n3", uv).len(), 3);
     }
+}
+
+/// `frame` and `time` read the frame of the load options (1 by default), `time` as
+/// `frame / fps` also where `fps` is connected; `geomcolor` is 0 with a warning naming it; a
+/// `frame` of another type is an error at its line.
+#[test]
+fn frame_time_and_vertex_colours() {
+    let text = doc(
+        "1.39",
+        r#"<nodegraph name="g">
+  <frame name="f" type="float"/>
+  <output name="frame" type="float" nodename="f"/>
+  <time name="t0" type="float"/>
+  <output name="time24" type="float" nodename="t0"/>
+  <time name="t1" type="float"><input name="fps" type="float" value="30"/></time>
+  <output name="time30" type="float" nodename="t1"/>
+  <texcoord name="uv" type="vector2"/>
+  <separate2 name="s" type="multioutput"><input name="in" type="vector2" nodename="uv"/></separate2>
+  <add name="rate" type="float"><input name="in1" type="float" nodename="s" output="outx"/><input name="in2" type="float" value="1"/></add>
+  <time name="t2" type="float"><input name="fps" type="float" nodename="rate"/></time>
+  <output name="timev" type="float" nodename="t2"/>
+  <geomcolor name="c" type="color3"/>
+  <output name="col" type="color3" nodename="c"/>
+</nodegraph>"#,
+    );
+    let uv = Vec2::new(0.25, 0.5);
+    let d = Document::parse(&text, Path::new("frame.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(eval(&d, "g/frame", uv), vec![1.0]);
+    assert_eq!(eval(&d, "g/time24", uv), vec![1.0 / 24.0]);
+    assert_eq!(eval(&d, "g/time30", uv), vec![1.0 / 30.0]);
+    assert!(close(&eval(&d, "g/timev", uv), &[1.0 / 1.25], 1e-6));
+    assert_eq!(eval(&d, "g/col", uv), vec![0.0, 0.0, 0.0]);
+    let w = d.graph().warnings();
+    assert!(w.iter().any(|w| w.contains("`g/c`") && w.contains("vertex colour")), "{w:?}");
+    let opts = LoadOptions { frame: Some(48.0), ..LoadOptions::default() };
+    let d = Document::parse(&text, Path::new("frame.mtlx"), &opts).unwrap();
+    assert_eq!(eval(&d, "g/frame", uv), vec![48.0]);
+    assert_eq!(eval(&d, "g/time24", uv), vec![2.0]);
+    assert!(close(&eval(&d, "g/timev", uv), &[48.0 / 1.25], 1e-5));
+
+    let dir = dir("frame");
+    let bad = write(
+        &dir,
+        "bad.mtlx",
+        &doc(
+            "1.39",
+            r#"<nodegraph name="g">
+  <frame name="f" type="color3"/>
+  <output name="o" type="color3" nodename="f"/>
+</nodegraph>"#,
+        ),
+    );
+    let e = expect_error(&bad, line_of(&bad, "<frame"));
+    assert!(e.to_string().contains("is a float"), "{e}");
 }

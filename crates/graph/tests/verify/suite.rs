@@ -173,7 +173,7 @@ fn materialx_conformance() {
     let root = common::shared().join("mtlx-suite");
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(root.join("manifest.json")).unwrap()).unwrap();
-    let opts = LoadOptions { search_paths: vec![root.join("images")], lenient: true };
+    let opts = LoadOptions { search_paths: vec![root.join("images")], lenient: true, ..LoadOptions::default() };
     let root_prefix = format!("{}/", root.display());
     let mut docs: BTreeMap<String, Result<Document, String>> = BTreeMap::new();
     let mut rows: BTreeMap<String, Vec<Row>> = BTreeMap::new();

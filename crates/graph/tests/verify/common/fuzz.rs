@@ -19,6 +19,8 @@ pub const EXCLUDED: &[(&str, &str)] = &[
     ("determinant", "matrices are folded at load, not evaluated"),
     ("invertmatrix", "matrices are folded at load, not evaluated"),
     ("transpose", "matrices are folded at load, not evaluated"),
+    ("frame", "folded to a constant by the MaterialX reader"),
+    ("time", "folded to a constant by the MaterialX reader"),
 ];
 
 /// Categories whose unfiltered function is continuous in every input (for any constants): their
@@ -67,6 +69,23 @@ pub const CONTINUOUS: &[&str] = &[
     "ramptb",
     "ramp4",
     "dot",
+    "plus",
+    "minus",
+    "difference",
+    "screen",
+    "overlay",
+    "over",
+    "in",
+    "mask",
+    "matte",
+    "out",
+    "inside",
+    "outside",
+    "premult",
+    "crossproduct",
+    "reflect",
+    "trianglewave",
+    "geomcolor",
 ];
 
 /// Every category the generator draws from.
