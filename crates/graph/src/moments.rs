@@ -69,6 +69,24 @@ pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
     }
 }
 
+/// `Σ kᵢ xᵢ` (up to four terms), with every pair's covariance: the variance of each term is
+/// its own, the cross terms are estimated from gradients. Exact where [`add_scaled`] chained
+/// over a sum that shares its terms (a channel and a luminance made of it) would lose the
+/// shared part's covariance to the gradient estimate.
+pub fn linear(k: &[f32], xs: &[Moments], fp: &Footprint) -> Moments {
+    debug_assert!(k.len() == xs.len() && xs.len() <= 4);
+    let (mut mean, mut grad, mut var) = (0.0f64, Vec2::ZERO, 0.0f64);
+    for (i, (ki, xi)) in k.iter().zip(xs).enumerate() {
+        mean += *ki as f64 * xi.mean as f64;
+        grad = add_grad(grad, scale_grad(xi.grad, *ki as f64));
+        var += (*ki as f64).powi(2) * xi.var as f64;
+        for (kj, xj) in k.iter().zip(xs).skip(i + 1) {
+            var += 2.0 * *ki as f64 * *kj as f64 * cov(xi, xj, fp) as f64;
+        }
+    }
+    Moments { mean: sat(mean), grad, var: sat(var.max(0.0)) }
+}
+
 /// `a · b` for jointly Gaussian operands.
 #[inline]
 pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {

@@ -18,6 +18,7 @@
 //! | `transformnormal` | `in` (0,0,1), `fromspace`, `tospace` | `normalize(in)` (MaterialX normalises), by cubature |
 //! | `transformmatrix` | `in` (0), `mat` (identity; a matrix folded at load, see [`crate::matrix`]) | affine `v · M` (vector2 with a matrix33 and vector3 with a matrix44 extended by a homogeneous 1): exact |
 //! | `dot` | `in` (0) | pass-through |
+//! | `blur` | `in` (0), `size` (0), `filtertype` | pass-through, as MaterialX's GLSL (which blurs image inputs only), with a warning unless `size` is 0: the footprint filtering every node gets is the blur tessera applies |
 //!
 //! Spaces: tessera transforms meshes and shapes to world space at load and keeps no object
 //! transform, so `object`, `model` and `world` are one space here: `position` and `normal`
@@ -57,6 +58,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "transformnormal",
     "transformmatrix",
     "dot",
+    "blur",
 ];
 
 /// Geometry operations.
@@ -93,6 +95,8 @@ pub enum GeometryOp {
     Rotate2d,
     /// `dot`
     Dot,
+    /// `blur`: `in` passed through, with a warning where `size` asks for a blur.
+    Blur(Option<String>),
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -130,6 +134,7 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             matches!(t, ValueType::Vector2 | ValueType::Vector3 | ValueType::Vector4)
         }),
         "dot" => (&[inp!("in", Out, Zero)], &[], types::numeric),
+        "blur" => (&[inp!("in", Out, Zero), inp!("size", Float, Zero)], &["filtertype"], types::float_or_vector),
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
@@ -233,6 +238,14 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
             GeometryOp::TransformMatrix { lin, t }
         }
         "constant" => GeometryOp::Constant,
+        "blur" => GeometryOp::Blur(match &srcs[1] {
+            Source::Constant(v) if v.v[0] == 0.0 => None,
+            _ => Some(
+                "`blur` passes `in` through unblurred, as MaterialX's GLSL does for procedural inputs (tessera \
+                 filters every node to its footprint already)"
+                    .to_string(),
+            ),
+        }),
         "place2d" => GeometryOp::Place2d,
         "rotate2d" => GeometryOp::Rotate2d,
         "rotate3d" => GeometryOp::Rotate3d,
@@ -259,6 +272,7 @@ pub(crate) fn warning(op: &GeometryOp) -> Option<String> {
     match op {
         GeometryOp::Texcoord(w) => w.clone(),
         GeometryOp::PropDefault(w) | GeometryOp::Absent(w) => Some(w.clone()),
+        GeometryOp::Blur(w) => w.clone(),
         _ => None,
     }
 }
@@ -315,7 +329,7 @@ pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut C
         GeometryOp::Prop(p) => geomprop(*p, ctx),
         GeometryOp::PropDefault(_) => ins[0],
         GeometryOp::Absent(_) => Filtered::zero(ty),
-        GeometryOp::Identity => ins[0],
+        GeometryOp::Identity | GeometryOp::Blur(_) => ins[0],
         GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
         GeometryOp::Rotate3d => rotate3d(ins, ctx),
         GeometryOp::TransformMatrix { lin, t } => {

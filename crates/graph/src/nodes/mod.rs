@@ -165,7 +165,9 @@ impl InputSpec {
             Def::Splat(x) => Value::splat(ty, x),
             Def::Pair(a, b) => Value::new(ValueType::Vector2, &[a, b]),
             Def::Triple(a, b, c) => Value::new(ty, &[a, b, c]),
-            Def::Quad(a, b, c, d) => Value::new(ty, &[a, b, c, d]),
+            // A four-channel default serves a three-channel variant too (`colorcorrect`'s `in`
+            // is (1, 1, 1) for color3 and (1, 1, 1, 0) for color4).
+            Def::Quad(a, b, c, d) => Value::new(ty, &[a, b, c, d][..ty.channels().min(4)]),
             Def::Uv => return Source::Texcoord,
             Def::Geom(g) => return Source::Geometry(g),
         };

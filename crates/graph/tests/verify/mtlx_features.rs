@@ -819,3 +819,75 @@ fn frame_time_and_vertex_colours() {
     let e = expect_error(&bad, line_of(&bad, "<frame"));
     assert!(e.to_string().contains("is a float"), "{e}");
 }
+
+/// `colorcorrect`, `ramp_gradient`, `bump` and `blur` equal the MaterialX graphs that define
+/// them, written out here from their nodes, at points and over footprints.
+#[test]
+fn composed_nodes_equal_their_definitions() {
+    let text = doc(
+        "1.39",
+        r#"<nodegraph name="g">
+  <texcoord name="t" type="vector2"/>
+  <multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="4, 4"/></multiply>
+  <noise2d name="c" type="color3"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector3" value="0.5, 0.5, 0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <noise2d name="k" type="float"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="float" value="0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <colorcorrect name="cc" type="color3">
+    <input name="in" type="color3" nodename="c"/><input name="hue" type="float" value="0.1"/><input name="saturation" type="float" value="1.3"/>
+    <input name="gamma" type="float" value="1.5"/><input name="lift" type="float" value="0.05"/><input name="gain" type="float" value="0.9"/>
+    <input name="contrast" type="float" value="1.2"/><input name="contrastpivot" type="float" value="0.4"/><input name="exposure" type="float" value="0.5"/>
+  </colorcorrect>
+  <output name="cc" type="color3" nodename="cc"/>
+  <hsvadjust name="h" type="color3"><input name="in" type="color3" nodename="c"/><input name="amount" type="vector3" value="0.1, 1, 1"/></hsvadjust>
+  <saturate name="sa" type="color3"><input name="in" type="color3" nodename="h"/><input name="amount" type="float" value="1.3"/></saturate>
+  <range name="ga" type="color3"><input name="in" type="color3" nodename="sa"/><input name="gamma" type="float" value="1.5"/></range>
+  <multiply name="l1" type="color3"><input name="in1" type="color3" nodename="ga"/><input name="in2" type="float" value="0.95"/></multiply>
+  <add name="l2" type="color3"><input name="in1" type="color3" nodename="l1"/><input name="in2" type="float" value="0.05"/></add>
+  <multiply name="gn" type="color3"><input name="in1" type="color3" nodename="l2"/><input name="in2" type="float" value="0.9"/></multiply>
+  <contrast name="co" type="color3"><input name="in" type="color3" nodename="gn"/><input name="amount" type="float" value="1.2"/><input name="pivot" type="float" value="0.4"/></contrast>
+  <multiply name="ex" type="color3"><input name="in1" type="color3" nodename="co"/><input name="in2" type="float" value="1.41421356"/></multiply>
+  <output name="cc_graph" type="color3" nodename="ex"/>
+  <ramp_gradient name="rg" type="color4">
+    <input name="x" type="float" nodename="k"/><input name="interval1" type="float" value="0.3"/><input name="interval2" type="float" value="0.7"/>
+    <input name="color1" type="color4" value="0.1, 0.2, 0.3, 1"/><input name="color2" type="color4" value="0.9, 0.5, 0.1, 0.5"/>
+    <input name="prev_color" type="color4" value="0, 0, 1, 1"/><input name="interpolation" type="integer" value="0"/>
+  </ramp_gradient>
+  <output name="rg" type="color4" nodename="rg"/>
+  <clamp name="rc" type="float"><input name="in" type="float" nodename="k"/><input name="low" type="float" value="0.3"/><input name="high" type="float" value="0.7"/></clamp>
+  <remap name="rr" type="float"><input name="in" type="float" nodename="rc"/><input name="inlow" type="float" value="0.3"/><input name="inhigh" type="float" value="0.7"/></remap>
+  <mix name="rm" type="color4"><input name="fg" type="color4" value="0.9, 0.5, 0.1, 0.5"/><input name="bg" type="color4" value="0.1, 0.2, 0.3, 1"/><input name="mix" type="float" nodename="rr"/></mix>
+  <ifgreater name="ri" type="color4"><input name="value1" type="float" nodename="k"/><input name="value2" type="float" value="0.3"/><input name="in1" type="color4" nodename="rm"/><input name="in2" type="color4" value="0, 0, 1, 1"/></ifgreater>
+  <output name="rg_graph" type="color4" nodename="ri"/>
+  <bump name="b" type="vector3"><input name="height" type="float" nodename="k"/><input name="scale" type="float" value="0.7"/></bump>
+  <output name="bump" type="vector3" nodename="b"/>
+  <heighttonormal name="hn" type="vector3"><input name="in" type="float" nodename="k"/></heighttonormal>
+  <normalmap name="nm" type="vector3"><input name="in" type="vector3" nodename="hn"/><input name="scale" type="float" value="0.7"/></normalmap>
+  <output name="bump_graph" type="vector3" nodename="nm"/>
+  <blur name="bl" type="color3"><input name="in" type="color3" nodename="c"/><input name="size" type="float" value="0.2"/></blur>
+  <output name="blur" type="color3" nodename="bl"/>
+  <output name="c" type="color3" nodename="c"/>
+</nodegraph>"#,
+    );
+    let d =
+        Document::parse(&text, Path::new("composed.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let w = d.graph().warnings();
+    assert!(w.iter().any(|w| w.contains("`g/bl`") && w.contains("unblurred")), "{w:?}");
+    let g = d.graph();
+    let mut scratch = EvalScratch::new(g);
+    let mut at = |name: &str, fp: &Footprint| {
+        let v = g.eval_output(g.output_id(name).unwrap(), fp, &mut scratch);
+        v.ch[..v.n()].iter().map(|m| m.mean).collect::<Vec<f32>>()
+    };
+    for uv in [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.9, 0.44), Vec2::new(0.31, 0.27)] {
+        for fp in [Footprint::point(uv), Footprint::isotropic(uv, 0.004), Footprint::isotropic(uv, 0.05)] {
+            for (node, graph, tol) in [
+                ("g/cc", "g/cc_graph", 2e-5),
+                ("g/rg", "g/rg_graph", 2e-6),
+                ("g/bump", "g/bump_graph", 1e-6),
+                ("g/blur", "g/c", 0.0),
+            ] {
+                let (a, b) = (at(node, &fp), at(graph, &fp));
+                assert!(close(&a, &b, tol), "{node} at {uv} σ² {:?}: {a:?} vs {b:?}", fp.cov);
+            }
+        }
+    }
+}

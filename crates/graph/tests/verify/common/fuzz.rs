@@ -86,6 +86,7 @@ pub const CONTINUOUS: &[&str] = &[
     "reflect",
     "trianglewave",
     "geomcolor",
+    "blur",
 ];
 
 /// Every category the generator draws from.
