@@ -263,6 +263,10 @@ pub enum Op {
     Normal(normal::NormalOp),
     /// `image`, `tiledimage`.
     Image(Arc<image::Texture>),
+    /// `latlongimage`.
+    LatLong(Arc<image::Texture>),
+    /// `triplanarprojection`.
+    Triplanar(Arc<image::Triplanar>),
     /// `hextiledimage`.
     HexTile(Arc<hextile::HexTile>),
     /// A node that evaluates its `default` input (its first), as MaterialX's image nodes do
@@ -294,6 +298,8 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Composite(c) => composite::eval(c, ty, ins, ctx),
         Op::Vector(v) => vector::eval(v, ty, ins, ctx),
         Op::Image(t) => image::eval(t, ty, ins, ctx),
+        Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
+        Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
         Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
         Op::Default(_) => ins[0],
