@@ -198,7 +198,9 @@ fn mtlx_frame(defines: &[(String, String)]) -> Option<f32> {
 
 struct Builder {
     base: PathBuf,
-    /// How MaterialX documents are read (the frame their `frame` and `time` nodes see).
+    /// How MaterialX documents are read: leniently (an unsupported or broken node fails only
+    /// the outputs and material inputs that need it), with the frame their `frame` and `time`
+    /// nodes see.
     mtlx: graph::LoadOptions,
     shapes: Vec<Shape>,
     materials: Vec<Material>,
@@ -250,7 +252,7 @@ impl Builder {
     fn new(base: PathBuf) -> Self {
         Builder {
             base,
-            mtlx: graph::LoadOptions::default(),
+            mtlx: graph::LoadOptions { lenient: true, ..graph::LoadOptions::default() },
             shapes: Vec::new(),
             materials: Vec::new(),
             graphs: Vec::new(),
@@ -527,6 +529,10 @@ impl Builder {
                 }
                 let (g, doc) = self.document(obj, &file)?;
                 let out = doc.graph().output_id(&output).ok_or_else(|| {
+                    if let Some((_, reason)) = doc.skipped().iter().find(|(n, _)| *n == output) {
+                        return obj
+                            .error_at("output", format!("output '{output}' of {file} cannot be evaluated: {reason}"));
+                    }
                     let names: Vec<&str> = doc.graph().outputs().iter().map(|o| o.name.as_str()).collect();
                     obj.error_at(
                         "output",
@@ -878,6 +884,12 @@ impl Builder {
                 format!("no material '{name}' in {file} (materials: {})", doc.material_names().join(", ")),
             )
         })?;
+        if !binding.unavailable.is_empty() {
+            return Err(obj.error_at(
+                "material",
+                format!("material '{name}' of {file} cannot be evaluated: {}", binding.unavailable.join("; ")),
+            ));
+        }
         for w in &binding.warnings {
             eprintln!("warning: {}: {w}", obj.loc);
         }
@@ -946,6 +958,11 @@ impl Builder {
         .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
         for w in doc.graph().warnings() {
             eprintln!("warning: {}: {w}", path.display());
+        }
+        // Nodes that cannot be evaluated fail only what needs them: here a warning names each,
+        // and the outputs left out; a texture or material that needs one is an error.
+        for u in doc.unsupported() {
+            eprintln!("warning: {}: {u}: what depends on it is left out", path.display());
         }
         if !self.embedded.contains_key(file) {
             self.files.extend(doc.files().iter().cloned());

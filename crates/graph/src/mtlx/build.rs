@@ -69,6 +69,10 @@ impl<'a, 'i> Importer<'a, 'i> {
                         }
                         self.builder.add_output(&name, ty, src).map_err(|e| self.err(o, e.into()))?;
                     }
+                    // Leniently, an output that cannot be built is left out with the reason.
+                    Err(Fail::Hard(e)) if self.opts.lenient && scoped(&e.kind) => {
+                        self.skipped.push((name, e.to_string()));
+                    }
                     Err(Fail::Soft(ix)) => {
                         let r = self.reason(&ix);
                         self.skipped.push((name, r));
@@ -258,6 +262,14 @@ impl<'a, 'i> Importer<'a, 'i> {
             Err(Fail::Soft(ix)) => {
                 self.soft.insert(q, ix.clone());
                 Err(Fail::Soft(ix))
+            }
+            // Leniently, a node that cannot be built (a malformed value, a missing file, a
+            // wrong type) fails only what needs it, like an unsupported node: scoped to the
+            // outputs and material inputs downstream, each told why (see `scoped`).
+            Err(Fail::Hard(e)) if self.opts.lenient && scoped(&e.kind) => {
+                let k = self.broken(self.category(el), &q, e);
+                self.soft.insert(q, vec![k]);
+                Err(Fail::Soft(vec![k]))
             }
             Err(e) => Err(e),
         }
@@ -463,6 +475,18 @@ impl<'a, 'i> Importer<'a, 'i> {
             Some(c) => self.convert_colors(q, src, ty, &c, el),
             None => Ok(src),
         }
+    }
+}
+
+/// Whether an error of a node is the node's own (a lenient load then fails only what needs
+/// it): a bad value, type, input, connection or file. Cycles, malformed structure and the
+/// document-wide limits (node count, nesting) stay errors of the whole document: going on after
+/// them could cost what the limits exist to prevent.
+fn scoped(kind: &LoadErrorKind) -> bool {
+    match kind {
+        LoadErrorKind::Build(b) => !matches!(b, BuildError::TooManyNodes(_) | BuildError::DuplicateName(_)),
+        LoadErrorKind::Dangling { .. } | LoadErrorKind::MissingFile(_) | LoadErrorKind::MalformedValue { .. } => true,
+        _ => false,
     }
 }
 

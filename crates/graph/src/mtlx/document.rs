@@ -168,11 +168,12 @@ impl Document {
             .find_map(|s| model_of(&s.category).map(|m| (s, m)))?;
         let lookup = |n: &str| sh.inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
         let mut warnings: Vec<String> = Vec::new();
-        let read = |n: &str, def: InputDefault, warnings: &mut Vec<String>| match lookup(n) {
+        let mut unavailable: Vec<String> = Vec::new();
+        let read = |n: &str, def: InputDefault, unavailable: &mut Vec<String>| match lookup(n) {
             Some(ShaderInput::Value(Some(v))) => MaterialSource::Constant(*v),
             Some(ShaderInput::Output(Ok(o))) => MaterialSource::Output(*o),
             Some(ShaderInput::Output(Err(reason))) => {
-                warnings.push(format!("{}: input `{n}` is not available: {reason}", sh.location));
+                unavailable.push(format!("{}: input `{n}` is not available: {reason}", sh.location));
                 default_source(def)
             }
             _ => default_source(def),
@@ -180,10 +181,10 @@ impl Document {
         let mut inputs = Vec::new();
         for (&(cname, cdef), mapped) in SUPPORTED_INPUTS.iter().zip(model.map) {
             let src = match *mapped {
-                Mapped::Same => read(cname, cdef, &mut warnings),
-                Mapped::Input(n, def) => read(n, def, &mut warnings),
+                Mapped::Same => read(cname, cdef, &mut unavailable),
+                Mapped::Input(n, def) => read(n, def, &mut unavailable),
                 Mapped::Fixed(ty, v) => MaterialSource::Constant(Value::new(ty, &[v])),
-                Mapped::GltfOpacity => self.gltf_opacity(sh, &mut warnings, &read),
+                Mapped::GltfOpacity => self.gltf_opacity(sh, &mut warnings, &mut unavailable, &read),
             };
             inputs.push((cname, src));
         }
@@ -216,12 +217,14 @@ impl Document {
         // glTF reads `base_color` twice (base and transmission tint): say a problem once.
         let mut seen = HashSet::new();
         warnings.retain(|w| seen.insert(w.clone()));
+        unavailable.retain(|w| seen.insert(w.clone()));
         Some(MaterialBinding {
             name: name.to_string(),
             shader: sh.name.clone(),
             model: model.category,
             inputs,
             warnings,
+            unavailable,
         })
     }
 
@@ -233,6 +236,7 @@ impl Document {
         &self,
         sh: &ShaderDef,
         warnings: &mut Vec<String>,
+        unavailable: &mut Vec<String>,
         read: &dyn Fn(&str, InputDefault, &mut Vec<String>) -> MaterialSource,
     ) -> MaterialSource {
         let lookup = |n: &str| sh.inputs.iter().find(|(k, _)| k == n).map(|(_, s)| s);
@@ -248,7 +252,7 @@ impl Document {
                     return match &sh.extras.alpha_mask {
                         Some(Ok(o)) => MaterialSource::Output(*o),
                         Some(Err(reason)) => {
-                            warnings.push(format!("{}: input `alpha` is not available: {reason}", sh.location));
+                            unavailable.push(format!("{}: input `alpha` is not available: {reason}", sh.location));
                             opaque
                         }
                         None => opaque,
@@ -258,13 +262,13 @@ impl Document {
                     warnings.push(format!("{}: {w}", sh.location));
                     0.5
                 });
-                let alpha = match read("alpha", f(1.0), warnings) {
+                let alpha = match read("alpha", f(1.0), unavailable) {
                     MaterialSource::Constant(v) => v.v[0],
                     _ => 1.0,
                 };
                 MaterialSource::Constant(Value::float(if alpha >= cutoff { 1.0 } else { 0.0 }))
             }
-            _ => read("alpha", f(1.0), warnings),
+            _ => read("alpha", f(1.0), unavailable),
         }
     }
 

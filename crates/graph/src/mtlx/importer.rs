@@ -267,6 +267,17 @@ impl<'a, 'i> Importer<'a, 'i> {
         Fail::Soft(vec![k])
     }
 
+    /// Records node `node` as broken by `e` (scoped, as an unsupported node is): its entry.
+    pub(super) fn broken(&mut self, category: &str, node: &str, e: LoadError) -> usize {
+        self.unsupported.push(Unsupported {
+            category: category.to_string(),
+            node: node.to_string(),
+            detail: e.kind.to_string(),
+            location: e.location,
+        });
+        self.unsupported.len() - 1
+    }
+
     pub(super) fn reason(&self, ix: &[usize]) -> String {
         // Unknown categories are unsupported; a known node with a bad input or type is named
         // with what is wrong with it.

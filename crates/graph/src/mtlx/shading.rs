@@ -28,9 +28,13 @@ pub struct MaterialBinding {
     /// `(input name, source)` for every supported input, in [`SUPPORTED_INPUTS`] order, with the
     /// `standard_surface` names: an `open_pbr_surface`'s `base_metalness` is `metalness` here.
     pub inputs: Vec<(&'static str, MaterialSource)>,
-    /// Inputs that could not be read, and (in one message) the inputs set to non-default values
-    /// that the binding does not carry.
+    /// The inputs set to non-default values that the binding does not carry (in one message),
+    /// and other inputs it reads differently from what they say.
     pub warnings: Vec<String>,
+    /// Inputs the material needs that cannot be evaluated (a graph output that depends on an
+    /// unsupported or broken node, in a document loaded leniently), each with the reason: the
+    /// binding gives them their defaults, and a renderer should refuse the material.
+    pub unavailable: Vec<String>,
 }
 
 impl MaterialBinding {

@@ -240,3 +240,48 @@ fn images_claiming_huge_sizes_are_refused() {
     // Refused by the decoder's limit from the header, not after trying to allocate 16 GiB.
     assert!(m.contains("limit"), "{m}");
 }
+
+/// Leniently, a node's own error (a malformed value, a missing image, an unknown input) fails
+/// only the outputs that need it, each with the reason and the element's line; the others load
+/// and evaluate. Strictly, the same document is the error it was. Document-wide errors (a
+/// cycle) stay errors either way.
+#[test]
+fn node_errors_are_scoped_in_lenient_loads() {
+    use graph::{Document, LoadErrorKind, LoadOptions};
+    let text = r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="bad">
+    <constant name="c" type="float"><input name="value" type="float" value="1.2.3"/></constant>
+    <output name="out" type="float" nodename="c"/>
+  </nodegraph>
+  <nodegraph name="img">
+    <image name="i" type="color3"><input name="file" type="filename" value="nowhere/none.png"/></image>
+    <output name="out" type="color3" nodename="i"/>
+  </nodegraph>
+  <nodegraph name="good">
+    <constant name="c" type="float"><input name="value" type="float" value="0.25"/></constant>
+    <output name="out" type="float" nodename="c"/>
+  </nodegraph>
+</materialx>"#;
+    let path = std::path::Path::new("scoped.mtlx");
+    let strict = Document::parse(text, path, &LoadOptions::default()).expect_err("strict load fails");
+    assert!(matches!(strict.kind, LoadErrorKind::MalformedValue { .. }), "{strict}");
+    let opts = LoadOptions { lenient: true, ..LoadOptions::default() };
+    let d = Document::parse(text, path, &opts).unwrap_or_else(|e| panic!("{e}"));
+    let g = d.graph();
+    let out = g.output_id("good/out").expect("the good output loads");
+    let mut scratch = graph::EvalScratch::new(g);
+    assert_eq!(g.eval_output(out, &graph::Footprint::point(glam::Vec2::ZERO), &mut scratch).ch[0].mean, 0.25);
+    for (name, line, what) in [("bad/out", 4, "malformed float value `1.2.3`"), ("img/out", 8, "none.png")] {
+        assert!(g.output_id(name).is_none(), "{name} is left out");
+        let (_, reason) = d.skipped().iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("{name} not skipped"));
+        assert!(reason.contains(what) && reason.contains(&format!("scoped.mtlx:{line}:")), "{name}: {reason}");
+    }
+    assert_eq!(d.unsupported().len(), 2, "{:?}", d.unsupported());
+    let cycle = r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">
+  <add name="a" type="float"><input name="in1" type="float" nodename="b"/></add>
+  <add name="b" type="float"><input name="in1" type="float" nodename="a"/></add>
+  <output name="out" type="float" nodename="a"/></nodegraph></materialx>"#;
+    let e = Document::parse(cycle, path, &opts).expect_err("a cycle is an error of the document");
+    assert!(matches!(e.kind, LoadErrorKind::Cycle(_)), "{e}");
+}

@@ -354,3 +354,48 @@ fn frame_define_drives_time_nodes() {
     assert!((m12 / m6 - 2.0).abs() < 1e-6, "{m6} {m12}");
     assert!((m6 / m1 - 6.0).abs() < 1e-6, "{m1} {m6}");
 }
+
+/// A document with one broken node graph still serves its other outputs and materials; a
+/// texture or material that needs the broken one is an error naming the element's line.
+#[test]
+fn broken_nodes_fail_only_what_needs_them() {
+    let dir = std::env::temp_dir().join(format!("render-scoped-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("mixed.mtlx"),
+        r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodegraph name="bad">
+    <constant name="c" type="color3"><input name="value" type="color3" value="0.5, oops, 0.5"/></constant>
+    <output name="out" type="color3" nodename="c"/>
+  </nodegraph>
+  <nodegraph name="good">
+    <constant name="c" type="color3"><input name="value" type="color3" value="0.5, 0.4, 0.3"/></constant>
+    <output name="out" type="color3" nodename="c"/>
+  </nodegraph>
+  <standard_surface name="SR_bad" type="surfaceshader"><input name="base_color" type="color3" nodegraph="bad" output="out"/></standard_surface>
+  <surfacematerial name="M_bad" type="material"><input name="surfaceshader" type="surfaceshader" nodename="SR_bad"/></surfacematerial>
+</materialx>"#,
+    )
+    .unwrap();
+    let load = |texture: &str| {
+        render::loader::load_str(&grazing_scene(texture), Path::new("scoped.xml"), &dir, &[]).map(|_| ())
+    };
+    let tex = |out: &str| {
+        format!(
+            r#"<texture type="mtlx" name="reflectance"><string name="filename" value="mixed.mtlx"/><string name="output" value="{out}"/></texture>"#
+        )
+    };
+    load(&tex("good/out")).unwrap_or_else(|e| panic!("{e}"));
+    let e = load(&tex("bad/out")).expect_err("the broken output is an error").to_string();
+    assert!(e.contains("cannot be evaluated") && e.contains("mixed.mtlx:4:") && e.contains("oops"), "{e}");
+    let scene = grazing_scene("").replace(
+        r#"<bsdf type="diffuse"></bsdf>"#,
+        r#"<bsdf type="mtlx"><string name="filename" value="mixed.mtlx"/><string name="material" value="M_bad"/></bsdf>"#,
+    );
+    let e = render::loader::load_str(&scene, Path::new("scoped.xml"), &dir, &[])
+        .map(|_| ())
+        .expect_err("the material needs it")
+        .to_string();
+    assert!(e.contains("material 'M_bad'") && e.contains("base_color") && e.contains("mixed.mtlx:4:"), "{e}");
+}
