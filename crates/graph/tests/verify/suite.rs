@@ -43,6 +43,8 @@ const IMAGE_MEAN: f32 = 0.025;
 const IMAGE_OUTLIERS: f32 = 0.001;
 /// Bakes that pass today: a regression floor on top of the per-bake check against the table.
 const MIN_PASS: usize = 248;
+/// The same floor for tessera's own references (`tests/mtlx-refs`).
+const MIN_OWN_PASS: usize = 490;
 
 /// Explanations of known differences, appended to failures: (document suffix, element prefix,
 /// note).
@@ -61,6 +63,9 @@ const NOTES: &[(&str, &str, &str)] = &[
     ),
     ("math/trig.mtlx", "asin_nodegraph", "the GPU's asin(0.5) is 2.1e-4 below π/6 = 0.5235988, which ours gives"),
 ];
+
+/// Explanations of known differences from tessera's own references (`tests/mtlx-refs`).
+const OWN_NOTES: &[(&str, &str, &str)] = &[];
 
 #[derive(Clone, Debug)]
 enum Outcome {
@@ -168,19 +173,38 @@ fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String],
     Outcome::Fail(s)
 }
 
-#[test]
-fn materialx_conformance() {
-    let root = common::shared().join("mtlx-suite");
+/// One reference set: a manifest of bakes in the format of `shared/mtlx-suite/manifest.json`.
+struct RefSet {
+    /// Folder of the manifest; documents and bakes are relative to it.
+    root: PathBuf,
+    /// How documents are named in the table: this prefix, then the manifest's path.
+    prefix: &'static str,
+    /// Image search path.
+    images: PathBuf,
+    /// Known differences: (document suffix, element prefix, note).
+    notes: &'static [(&'static str, &'static str, &'static str)],
+}
+
+/// Bakes and compares every entry of a reference set: rows per document (named with the set's
+/// prefix), the entries whose image bound would not reject a v-flipped bake, and the nodedef of
+/// each element where the manifest names one.
+fn run(set: &RefSet) -> (BTreeMap<String, Vec<Row>>, Vec<String>, BTreeMap<(String, String), String>) {
+    let root = &set.root;
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(root.join("manifest.json")).unwrap()).unwrap();
-    let opts = LoadOptions { search_paths: vec![root.join("images")], lenient: true };
+    let opts = LoadOptions { search_paths: vec![set.images.clone()], lenient: true };
     let root_prefix = format!("{}/", root.display());
     let mut docs: BTreeMap<String, Result<Document, String>> = BTreeMap::new();
     let mut rows: BTreeMap<String, Vec<Row>> = BTreeMap::new();
+    let mut nodedefs = BTreeMap::new();
     let mut weak = Vec::new();
     for b in manifest["bakes"].as_array().unwrap() {
         let doc_path = b["document"].as_str().unwrap().to_string();
         let element = b["element"].as_str().unwrap().to_string();
+        let name = format!("{}{doc_path}", set.prefix);
+        if let Some(nd) = b["nodedef"].as_str() {
+            nodedefs.insert((name.clone(), element.clone()), nd.to_string());
+        }
         let doc = docs.entry(doc_path.clone()).or_insert_with(|| {
             Document::load_with(root.join(&doc_path), &opts).map_err(|e| e.to_string().replace(&root_prefix, ""))
         });
@@ -225,7 +249,7 @@ fn materialx_conformance() {
                             )
                             .unwrap();
                             if !symmetric && matches!(compare(&flipped, &img, &names, true), Outcome::Pass { .. }) {
-                                weak.push(format!("{doc_path} {element}"));
+                                weak.push(format!("{name} {element}"));
                             }
                         }
                         outcome
@@ -239,7 +263,7 @@ fn materialx_conformance() {
         };
         let outcome = match outcome {
             Outcome::Fail(mut s) => {
-                for (d, e, note) in NOTES {
+                for (d, e, note) in set.notes {
                     if doc_path.ends_with(d) && element.starts_with(e) {
                         let _ = write!(s, ". Known difference: {note}");
                     }
@@ -248,22 +272,72 @@ fn materialx_conformance() {
             }
             o => o,
         };
-        rows.entry(doc_path).or_default().push(Row { element, outcome });
+        rows.entry(name).or_default().push(Row { element, outcome });
     }
+    (rows, weak, nodedefs)
+}
+
+/// Pass, fail and unsupported counts of some rows.
+fn counts<'a>(rows: impl Iterator<Item = &'a Row>) -> [usize; 4] {
+    let mut c = [0; 4];
+    for r in rows {
+        c[0] += 1;
+        match r.outcome {
+            Outcome::Pass { .. } => c[1] += 1,
+            Outcome::Fail(_) => c[2] += 1,
+            Outcome::Unsupported(_) => c[3] += 1,
+        }
+    }
+    c
+}
+
+/// The summary table of a section (`groups`: group name → rows), then its per-document rows.
+fn section(md: &mut String, what: &str, groups: &BTreeMap<String, [usize; 4]>, rows: &BTreeMap<String, Vec<Row>>) {
+    let _ = writeln!(md, "| {what} | bakes | pass | fail | unsupported |\n|---|---|---|---|---|");
+    for (f, c) in groups {
+        let _ = writeln!(md, "| {f} | {} | {} | {} | {} |", c[0], c[1], c[2], c[3]);
+    }
+    for (d, rs) in rows {
+        let _ = writeln!(md, "\n### `{d}`\n\n| element | result | detail |\n|---|---|---|");
+        for r in rs {
+            let (what, detail) = match &r.outcome {
+                Outcome::Pass { max_err } => ("pass", format!("max error {max_err:.1e}")),
+                Outcome::Fail(s) => ("fail", s.clone()),
+                Outcome::Unsupported(s) => ("unsupported", s.clone()),
+            };
+            let _ = writeln!(md, "| `{}` | {what} | {} |", r.element, detail.replace('|', "\\|"));
+        }
+    }
+}
+
+#[test]
+fn materialx_conformance() {
+    let images = common::shared().join("mtlx-suite/images");
+    let suite = RefSet { root: common::shared().join("mtlx-suite"), prefix: "", images: images.clone(), notes: NOTES };
+    let own = RefSet {
+        root: Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mtlx-refs"),
+        prefix: "mtlx-refs/",
+        images,
+        notes: OWN_NOTES,
+    };
+    let (rows, mut weak, _) = run(&suite);
+    let (own_rows, own_weak, own_nodedefs) = run(&own);
+    let own_manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(own.root.join("manifest.json")).unwrap()).unwrap();
+    let own_resolution = own_manifest["resolution"][0].as_u64().unwrap_or(0);
+    weak.extend(own_weak);
 
     // The table.
-    let count = |f: &dyn Fn(&Outcome) -> bool| rows.values().flatten().filter(|r| f(&r.outcome)).count();
-    let passed = count(&|o| matches!(o, Outcome::Pass { .. }));
-    let failed = count(&|o| matches!(o, Outcome::Fail(_)));
-    let unsupported = count(&|o| matches!(o, Outcome::Unsupported(_)));
-    let total = passed + failed + unsupported;
+    let [total, passed, failed, unsupported] = counts(rows.values().flatten());
+    let [own_total, own_passed, own_failed, own_unsupported] = counts(own_rows.values().flatten());
     let mut md = String::new();
     let _ = writeln!(md, "# MaterialX conformance\n");
     let _ = writeln!(
         md,
         "Generated by `cargo test --release -p graph --test verify suite::` (do not edit by hand, except to remove a \
          row whose loss is intended). Every bake of `../shared/mtlx-suite/manifest.json` (MaterialX 1.39.5's \
-         own GLSL bakes of its test suite, 128 × 128 over uv [0, 1]², row 0 = v = 1) is made with \
+         own GLSL bakes of its test suite, 128 × 128 over uv [0, 1]², row 0 = v = 1) and of \
+         `crates/graph/tests/mtlx-refs/manifest.json` (tessera's own references below) is made with \
          `graph::bake` — what `tessera bake` runs — and compared texel by texel.\n"
     );
     let _ = writeln!(
@@ -276,36 +350,46 @@ fn materialx_conformance() {
     );
     let _ = writeln!(
         md,
-        "**{total} bakes: {passed} pass, {failed} fail, {unsupported} unsupported.**\n\n\
-         | folder | bakes | pass | fail | unsupported |\n|---|---|---|---|---|"
+        "- MaterialX's test suite: **{total} bakes: {passed} pass, {failed} fail, {unsupported} unsupported.**\n\
+         - Own references: **{own_total} bakes: {own_passed} pass, {own_failed} fail, {own_unsupported} \
+         unsupported** ({:.1} % pass; {:.1} % of the bakes tessera supports).\n",
+        100.0 * own_passed as f64 / own_total.max(1) as f64,
+        100.0 * own_passed as f64 / (own_passed + own_failed).max(1) as f64
     );
+    let _ = writeln!(md, "## MaterialX's test suite\n");
     let mut folders: BTreeMap<String, [usize; 4]> = BTreeMap::new();
     for (d, rs) in &rows {
+        let c = counts(rs.iter());
         let f = folders.entry(d.split('/').nth(1).unwrap_or("?").to_string()).or_default();
+        for k in 0..4 {
+            f[k] += c[k];
+        }
+    }
+    section(&mut md, "folder", &folders, &rows);
+    let _ = writeln!(
+        md,
+        "\n## Own references\n\n\
+         `crates/graph/tests/mtlx-refs`: one graph per nodedef of MaterialX 1.39.5's standard library whose output \
+         is a value (not a shader, material, matrix, string or filename), every numeric input driven by its own \
+         ramp over u or v (`scripts/mtlx-gen-refs.py`), baked {}² by MaterialX's GLSL TextureBaker under Xvfb with \
+         Mesa's llvmpipe (`scripts/mtlx-bake-refs.sh`). Grouped by node group:\n",
+        own_resolution
+    );
+    let group_of: BTreeMap<String, String> =
+        crate::coverage::nodedefs().into_iter().map(|nd| (nd.name, nd.nodegroup)).collect();
+    let mut groups: BTreeMap<String, [usize; 4]> = BTreeMap::new();
+    for (d, rs) in &own_rows {
         for r in rs {
-            f[0] += 1;
-            match r.outcome {
-                Outcome::Pass { .. } => f[1] += 1,
-                Outcome::Fail(_) => f[2] += 1,
-                Outcome::Unsupported(_) => f[3] += 1,
+            let nd = own_nodedefs.get(&(d.clone(), r.element.clone()));
+            let g = nd.and_then(|n| group_of.get(n)).cloned().unwrap_or_else(|| "?".into());
+            let c = counts(std::iter::once(r));
+            let f = groups.entry(g).or_default();
+            for k in 0..4 {
+                f[k] += c[k];
             }
         }
     }
-    for (f, c) in &folders {
-        let _ = writeln!(md, "| {f} | {} | {} | {} | {} |", c[0], c[1], c[2], c[3]);
-    }
-    let _ = writeln!(md, "\n## Per document");
-    for (d, rs) in &rows {
-        let _ = writeln!(md, "\n### `{d}`\n\n| element | result | detail |\n|---|---|---|");
-        for r in rs {
-            let (what, detail) = match &r.outcome {
-                Outcome::Pass { max_err } => ("pass", format!("max error {max_err:.1e}")),
-                Outcome::Fail(s) => ("fail", s.clone()),
-                Outcome::Unsupported(s) => ("unsupported", s.clone()),
-            };
-            let _ = writeln!(md, "| `{}` | {what} | {} |", r.element, detail.replace('|', "\\|"));
-        }
-    }
+    section(&mut md, "node group", &groups, &own_rows);
     print!("{md}");
 
     // Regressions against the committed table.
@@ -313,7 +397,11 @@ fn materialx_conformance() {
     let previous = std::fs::read_to_string(&path).unwrap_or_default();
     let mut regressions = Vec::new();
     for (d, e) in previous_passes(&previous) {
-        let now = rows.get(&d).and_then(|rs| rs.iter().find(|r| r.element == e)).map(|r| &r.outcome);
+        let now = rows
+            .get(&d)
+            .or_else(|| own_rows.get(&d))
+            .and_then(|rs| rs.iter().find(|r| r.element == e))
+            .map(|r| &r.outcome);
         if !matches!(now, Some(Outcome::Pass { .. })) {
             regressions.push(format!("{d} {e}: {now:?}"));
         }
@@ -331,4 +419,5 @@ fn materialx_conformance() {
     }
     assert!(weak.is_empty(), "the image bound does not reject v-flipped bakes of: {weak:?}");
     assert!(passed >= MIN_PASS, "only {passed} bakes pass (at least {MIN_PASS} did)");
+    assert!(own_passed >= MIN_OWN_PASS, "only {own_passed} own references pass (at least {MIN_OWN_PASS} did)");
 }
