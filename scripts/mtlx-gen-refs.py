@@ -71,8 +71,8 @@ RANGES = {
     "reflect": {"in": (-1.0, 1.0), "normal": (-0.7, 0.9)},
     "refract": {"in": (-1.0, 1.0), "normal": (-0.7, 0.9), "ior": (1.1, 1.7)},
     "smoothstep": {"in": (-0.2, 1.2), "low": (0.0, 0.3), "high": (0.7, 1.0)},
-    "remap": {"in": (-0.2, 1.2), "inlow": (0.0, 0.2), "inhigh": (0.8, 1.0), "outlow": (-1.0, -0.5), "outhigh": (1.0, 2.0)},
-    "range": {"in": (-0.2, 1.2), "inlow": (0.0, 0.2), "inhigh": (0.8, 1.0), "gamma": (0.5, 2.0), "outlow": (-1.0, -0.5), "outhigh": (1.0, 2.0)},
+    "remap": {"in": (-0.2, 1.2), "inlow": (0.01, 0.23), "inhigh": (0.8, 1.0), "outlow": (-1.0, -0.5), "outhigh": (1.0, 2.0)},
+    "range": {"in": (-0.2, 1.2), "inlow": (0.01, 0.23), "inhigh": (0.8, 1.0), "gamma": (0.5, 2.0), "outlow": (-1.0, -0.5), "outhigh": (1.0, 2.0)},
     "trianglewave": {"*": (-2.03, 2.97)},
     "contrast": {"in": (0.0, 1.0), "amount": (0.5, 2.0), "pivot": (0.3, 0.7)},
     "hsvadjust": {"in": (0.05, 0.95), "amount": (0.2, 1.2)},
@@ -112,7 +112,7 @@ RANGES = {
     "splittb": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7)},
     "image": {"texcoord": IMAGE_UV},
     "tiledimage": {"texcoord": IMAGE_UV, "uvtiling": (1.0, 1.2), "uvoffset": (0.0, 0.05)},
-    "hextiledimage": {"texcoord": (0.0, 2.0), "rotation": (0.0, 1.0), "scale": (0.5, 1.0), "offset": (0.0, 1.0)},
+    "hextiledimage": {"texcoord": (0.2, 0.45), "rotation": (0.0, 1.0), "scale": (0.5, 1.0), "offset": (0.0, 1.0)},
     "hextilednormalmap": {"texcoord": (0.0, 2.0), "rotation": (0.0, 1.0), "scale": (0.5, 1.0), "offset": (0.0, 1.0)},
     "triplanarprojection": {"position": (-1.0, 1.0), "normal": (-1.0, 1.0)},
     "normalmap": {"in": (0.1, 0.9), "scale": (0.5, 1.5), "normal": (-0.5, 1.0), "tangent": (-0.5, 1.0), "bitangent": (-0.5, 1.0)},
@@ -137,6 +137,14 @@ CONSTANTS = {
     "extract": {"index": "1"},
     "geompropvalue": {"geomprop": "uv"},
     "hextilednormalmap": {"file": NORMAL_IMAGE},
+    # Real-world sizes at their defaults keep the image magnified (see IMAGE_UV).
+    "tiledimage": {"realworldimagesize": "1.0, 1.0", "realworldtilesize": "1.0, 1.0"},
+    # Per-tile ranges and luma weights at their defaults (None: the nodedef's default).
+    "hextiledimage": {"tiling": None, "rotationrange": None, "scalerange": None, "offsetrange": None, "lumacoeffs": None},
+    # jitter < 1 rotates the lattice by (jitter - 1) * 90000 degrees (3D: moves it as far along
+    # z), where single-precision sin/cos and floor differ between any two implementations.
+    "unifiednoise2d": {"jitter": "1.0"},
+    "unifiednoise3d": {"jitter": "1.0"},
 }
 
 # Integer and boolean inputs that are operands (driven), not settings.
@@ -232,7 +240,7 @@ def input_range(nd, inp, k):
 
 def constant(nd, inp):
     c = CONSTANTS.get(nd["node"], {})
-    if inp["name"] in c:
+    if c.get(inp["name"]) is not None:
         return c[inp["name"]]
     if inp["type"] == "filename":
         return IMAGE
@@ -250,7 +258,8 @@ def graph_for(nd):
     k = 0
     for inp in nd["inputs"]:
         ty = inp["type"]
-        driven = not inp.get("uniform") and (
+        fixed = inp["name"] in CONSTANTS.get(nd["node"], {})
+        driven = not fixed and not inp.get("uniform") and (
             ty in CHANNELS or (ty in ("integer", "boolean") and inp["name"] in OPERANDS)
         )
         if not driven:
