@@ -99,7 +99,10 @@ RANGES = {
     "circle": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.15, 0.45)},
     "cloverleaf": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.15, 0.45)},
     "hexagon": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.15, 0.45)},
-    "line": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.02, 0.12), "point1": (0.1, 0.4), "point2": (0.6, 0.9)},
+    # line: the segment point1–point2 is relative to center.
+    "line": {"texcoord": (0.0, 1.0), "center": (0.45, 0.55), "radius": (0.02, 0.12), "point1": (-0.4, -0.1), "point2": (0.1, 0.4)},
+    # ifequal: whole numbers (QUANTIZED), so that the operands are sometimes equal.
+    "ifequal": {"value1": (0.2, 3.8), "value2": (0.3, 3.7)},
     "grid": {"texcoord": (0.0, 1.0), "uvtiling": (2.0, 6.0), "uvoffset": (-0.2, 0.2), "thickness": (0.02, 0.15)},
     "crosshatch": {"texcoord": (0.0, 1.0), "uvtiling": (2.0, 6.0), "uvoffset": (-0.2, 0.2), "thickness": (0.02, 0.15)},
     "tiledcircles": {"texcoord": (0.0, 1.0), "uvtiling": (2.0, 6.0), "uvoffset": (-0.2, 0.2), "size": (0.3, 0.9)},
@@ -148,7 +151,9 @@ CONSTANTS = {
 }
 
 # Integer and boolean inputs that are operands (driven), not settings.
-OPERANDS = {"in", "in1", "in2", "value1", "value2", "which", "fg", "bg"}
+OPERANDS = {"in", "in1", "in2", "value1", "value2", "which", "fg", "bg", "value"}
+# Float inputs driven by the floor of their ramp, per category.
+QUANTIZED = {"ifequal": {"value1", "value2"}}
 
 
 def typed_default(ty):
@@ -287,6 +292,9 @@ def graph_for(nd):
             src = prefix + "_bool"
         else:
             src = g.ramp(prefix, ty, lo, hi, k)
+            if inp["name"] in QUANTIZED.get(nd["node"], ()):
+                g.node("floor", prefix + "_whole", ty, [("in", ty, "node", src, None)])
+                src = prefix + "_whole"
         ins.append((inp["name"], ty, "node", src, None))
         k += 1
     multi = len(nd["outputs"]) > 1
