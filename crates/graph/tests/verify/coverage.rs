@@ -23,9 +23,7 @@ pub struct Input {
     pub name: String,
     pub ty: String,
     pub value: Option<String>,
-    pub uniform: bool,
     pub enumeration: Vec<String>,
-    pub defaultgeomprop: Option<String>,
 }
 
 /// One nodedef of the signature table.
@@ -59,12 +57,10 @@ pub fn nodedefs() -> Vec<NodeDef> {
                     name: s(&i["name"]),
                     ty: s(&i["type"]),
                     value: i["value"].as_str().map(str::to_string),
-                    uniform: i["uniform"].as_bool().unwrap_or(false),
                     enumeration: i["enum"]
                         .as_array()
                         .map(|a| a.iter().map(|e| s(e).trim().to_string()).collect())
                         .unwrap_or_default(),
-                    defaultgeomprop: i["defaultgeomprop"].as_str().map(str::to_string),
                 })
                 .collect(),
         })

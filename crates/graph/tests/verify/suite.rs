@@ -1,7 +1,9 @@
-//! MaterialX conformance: every bake listed in `shared/mtlx-suite/manifest.json` is made with
+//! MaterialX conformance: every bake listed in `shared/mtlx-suite/manifest.json` (MaterialX's test
+//! suite) and in `tests/mtlx-refs/manifest.json` (tessera's own documents covering every
+//! value-typed nodedef of the standard library, made by `scripts/mtlx-bake-refs.sh`) is made with
 //! [`graph::bake`] — the function `tessera bake` runs — and compared texel by texel with
 //! MaterialX 1.39.5's own GLSL bake. The per-document results are written to
-//! `docs/materialx-conformance.md`.
+//! `docs/materialx-conformance.md`, one section per reference set.
 //!
 //! Documents load leniently: an output that needs an unsupported node is reported with the
 //! node(s) and their document lines. Tolerances:
