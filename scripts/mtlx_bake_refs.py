@@ -172,6 +172,9 @@ def main():
         }
         if files:
             record["texture_files"] = files
+        # Uniforms the baker leaves at their GLSL initializers (it binds no time or frame).
+        private = dict(re.findall(r"^uniform (?:float|int) (u_time|u_frame) = ([-0-9.eE+]+);", pixel, flags=re.M))
+        record["shader_private_uniforms"] = {k: float(v) for k, v in private.items()}
         if any(re.search(r"\b%s\b" % a, vertex) for a in FLAT) and record["depends_on_geometry"]:
             v2 = vertex
             for a, c in FLAT.items():

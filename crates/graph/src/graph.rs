@@ -331,7 +331,7 @@ impl GraphBuilder {
             ty,
             inputs: srcs,
             consts,
-            reads_gradients: def.category == "heighttonormal",
+            reads_gradients: matches!(def.category, "heighttonormal" | "bump"),
             params,
             upstream: std::sync::OnceLock::new(),
             uv_only,

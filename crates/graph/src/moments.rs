@@ -69,6 +69,24 @@ pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
     }
 }
 
+/// `Σ kᵢ xᵢ` (up to four terms), with every pair's covariance: the variance of each term is
+/// its own, the cross terms are estimated from gradients. Exact where [`add_scaled`] chained
+/// over a sum that shares its terms (a channel and a luminance made of it) would lose the
+/// shared part's covariance to the gradient estimate.
+pub fn linear(k: &[f32], xs: &[Moments], fp: &Footprint) -> Moments {
+    debug_assert!(k.len() == xs.len() && xs.len() <= 4);
+    let (mut mean, mut grad, mut var) = (0.0f64, Vec2::ZERO, 0.0f64);
+    for (i, (ki, xi)) in k.iter().zip(xs).enumerate() {
+        mean += *ki as f64 * xi.mean as f64;
+        grad = add_grad(grad, scale_grad(xi.grad, *ki as f64));
+        var += (*ki as f64).powi(2) * xi.var as f64;
+        for (kj, xj) in k.iter().zip(xs).skip(i + 1) {
+            var += 2.0 * *ki as f64 * *kj as f64 * cov(xi, xj, fp) as f64;
+        }
+    }
+    Moments { mean: sat(mean), grad, var: sat(var.max(0.0)) }
+}
+
 /// `a · b` for jointly Gaussian operands.
 #[inline]
 pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
@@ -301,6 +319,55 @@ pub fn frac_moments(m: f64, s: f64) -> FracMoments {
     }
 }
 
+/// Mean, variance and `dE/dm` of the triangle wave `tri(X)`, the distance from `X` to the
+/// nearest integer (MaterialX's `trianglewave`, `0.5 − |mod(|x|, 1) − 0.5|`), for
+/// `X ~ N(m, s²)`.
+///
+/// Below 0.4 periods of spread: exact, as the wave's linear pieces over the half-cells within
+/// ±7σ (the centre moved into [0, 1) first, the wave being periodic). Above: its Fourier series
+/// `tri = 1/4 − (2/π²) Σ_{k odd} cos(2πkx)/k²` and `tri² = 1/12 + Σ_k (−1)^k cos(2πkx)/(π²k²)`,
+/// each mode damped by `e^{−2π²k²s²}` (below 1e-12 from k = 3 on).
+pub fn tri_moments(m: f64, s: f64) -> (f64, f64, f64) {
+    use gaussian::{cells, piecewise_moments, poly, Piece};
+    use std::f64::consts::PI;
+    let f = m - m.floor();
+    if s <= 0.0 || !f.is_finite() {
+        let slope = if f < 0.5 { 1.0 } else { -1.0 };
+        return (f.min(1.0 - f), 0.0, slope);
+    }
+    if s < 0.4 {
+        const MAX: usize = 16;
+        let empty = Piece { lo: 0.0, hi: 0.0, p: poly(&[]) };
+        let mut pieces = [empty; MAX];
+        let mut n = 0;
+        for h in cells((2.0 * (f - 7.0 * s)).floor(), (2.0 * (f + 7.0 * s)).floor()).take(MAX) {
+            let (lo, j) = (0.5 * h, (0.5 * h).floor());
+            // Rising from the integer j on its first half, falling to j + 1 on its second.
+            let p = if lo == j { poly(&[-j, 1.0]) } else { poly(&[j + 1.0, -1.0]) };
+            pieces[n] = Piece { lo, hi: lo + 0.5, p };
+            n += 1;
+        }
+        return piecewise_moments(&pieces[..n], f, s);
+    }
+    let (mut e, mut e2, mut de) = (0.25, 1.0 / 12.0, 0.0);
+    for k in 1..=4 {
+        let kf = k as f64;
+        let w = 2.0 * PI * kf;
+        let att = (-0.5 * w * w * s * s).exp();
+        if att < 1e-12 {
+            break;
+        }
+        let (sn, cs) = (w * f).sin_cos();
+        if k % 2 == 1 {
+            e -= 2.0 / (PI * PI * kf * kf) * cs * att;
+            de += 4.0 / (PI * kf) * sn * att;
+        }
+        let sign = if k % 2 == 1 { -1.0 } else { 1.0 };
+        e2 += sign * cs * att / (PI * PI * kf * kf);
+    }
+    (e, (e2 - e * e).max(0.0), de)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -352,6 +419,25 @@ mod tests {
             assert_eq!(f.floor, m.floor(), "m {m} s {s}");
             assert_eq!(f.dmean, 1.0, "m {m} s {s}");
             assert_eq!(f.var, s * s, "m {m} s {s}");
+        }
+    }
+
+    /// The triangle wave's moments against direct integration, on both sides of the switch to
+    /// the Fourier series, far from the origin and at negative centres.
+    #[test]
+    fn triangle_wave_moments_match_direct_integration() {
+        let tri = |x: f64| 0.5 - ((x.abs() - x.abs().floor()) - 0.5).abs();
+        for &(m, s) in
+            &[(0.3, 0.05), (2.97, 0.02), (-7.5, 0.2), (1234.6, 0.35), (0.1, 0.45), (-40.2, 1.3), (3.0, 0.001)]
+        {
+            let (e, v, de) = tri_moments(m, s);
+            let want = quadrature(m, s, tri);
+            let want2 = quadrature(m, s, |x| tri(x).powi(2)) - want * want;
+            let h = 1e-4 * s.max(1e-3);
+            let slope = (quadrature(m + h, s, tri) - quadrature(m - h, s, tri)) / (2.0 * h);
+            assert!((e - want).abs() < 1e-6, "mean m {m} s {s}: {e} vs {want}");
+            assert!((v - want2).abs() < 1e-6, "var m {m} s {s}: {v} vs {want2}");
+            assert!((de - slope).abs() < 1e-3, "slope m {m} s {s}: {de} vs {slope}");
         }
     }
 }

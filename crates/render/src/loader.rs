@@ -156,6 +156,7 @@ pub fn load_file(path: &Path, defines: &[(String, String)]) -> Result<Scene> {
     let (root, includes) = xml::parse_file_with_includes(path, defines)?;
     let base = path.parent().map(Path::to_path_buf).unwrap_or_default();
     let mut b = Builder::new(base);
+    b.mtlx.frame = mtlx_frame(defines);
     b.files.push(path.to_path_buf());
     b.files.extend(includes);
     b.build(&root)
@@ -177,13 +178,28 @@ pub fn load_str_with_files(
 ) -> Result<Scene> {
     let (root, includes) = xml::parse_with_includes(text, virtual_path, defines)?;
     let mut b = Builder::new(base_dir.to_path_buf());
+    b.mtlx.frame = mtlx_frame(defines);
     b.files.extend(includes);
     b.embedded = files.iter().map(|(n, t)| (n.to_string(), t.to_string())).collect();
     b.build(&root)
 }
 
+/// The frame MaterialX's `frame` and `time` nodes read: the define `frame` where it is a number
+/// (`-D frame=12`, as `render_frames` and the farm's frame template pass it), else their
+/// default.
+fn mtlx_frame(defines: &[(String, String)]) -> Option<f32> {
+    defines
+        .iter()
+        .rev()
+        .find(|(k, _)| k == "frame")
+        .and_then(|(_, v)| v.trim().parse::<f32>().ok())
+        .filter(|f| f.is_finite())
+}
+
 struct Builder {
     base: PathBuf,
+    /// How MaterialX documents are read (the frame their `frame` and `time` nodes see).
+    mtlx: graph::LoadOptions,
     shapes: Vec<Shape>,
     materials: Vec<Material>,
     /// Procedural graphs, one per MaterialX document, and the documents by resolved path.
@@ -234,6 +250,7 @@ impl Builder {
     fn new(base: PathBuf) -> Self {
         Builder {
             base,
+            mtlx: graph::LoadOptions::default(),
             shapes: Vec::new(),
             materials: Vec::new(),
             graphs: Vec::new(),
@@ -920,11 +937,11 @@ impl Builder {
             return Ok(d.clone());
         }
         let doc = if let Some(text) = self.embedded.get(file) {
-            graph::Document::parse(text, Path::new(file), &graph::LoadOptions::default())
+            graph::Document::parse(text, Path::new(file), &self.mtlx)
         } else if !path.is_file() {
             return Err(obj.error_at("filename", format!("MaterialX document '{}' not found", path.display())));
         } else {
-            graph::Document::load(&path)
+            graph::Document::load_with(&path, &self.mtlx)
         }
         .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
         for w in doc.graph().warnings() {

@@ -63,6 +63,13 @@ pub(crate) struct BakeJob {
     /// Worker threads (default: all cores); the image does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// The frame MaterialX's `frame` and `time` nodes read (default 1; `time` is frame / fps).
+    #[arg(long, value_parser = parse_frame)]
+    frame: Option<f32>,
+}
+
+fn parse_frame(s: &str) -> Result<f32, String> {
+    s.trim().parse::<f32>().ok().filter(|f| f.is_finite()).ok_or_else(|| format!("`{s}` is not a frame number"))
 }
 
 /// A finished bake: the image, the element's type, the threads it ran on and its seconds.
@@ -90,7 +97,7 @@ impl BakeJob {
         settings.validate()?;
         // Lenient: nodes the element does not need may be unsupported; if it needs one,
         // resolving it reports which (with their lines).
-        let opts = LoadOptions { search_paths: self.search_paths.clone(), lenient: true };
+        let opts = LoadOptions { search_paths: self.search_paths.clone(), lenient: true, frame: self.frame };
         let doc = Document::load_with(&self.document, &opts)?;
         let (source, ty) = bake::resolve(&doc, &self.element).with_context(|| self.document.display().to_string())?;
         let threads = self.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

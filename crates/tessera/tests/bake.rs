@@ -270,3 +270,34 @@ fn extreme_finite_inputs_bake_finite_values_quickly() {
         }
     }
 }
+
+/// `--frame` sets what `frame` and `time` read (1 by default); a frame that is not a number is
+/// refused before anything is written.
+#[test]
+fn frame_option_reaches_time_nodes() {
+    let dir = temp_dir("frame");
+    std::fs::write(
+        dir.join("t.mtlx"),
+        r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">
+  <time name="t" type="float"><input name="fps" type="float" value="24"/></time>
+  <output name="out" type="float" nodename="t"/></nodegraph></materialx>"#,
+    )
+    .unwrap();
+    for (frame, want) in [(None, 1.0f32 / 24.0), (Some("48"), 2.0)] {
+        let mut args = vec!["t.mtlx", "--element", "g/out", "--res", "2", "--out", "t.exr"];
+        if let Some(f) = frame {
+            args.extend(["--frame", f]);
+        }
+        bake(&dir, &args);
+        let (_, _, chans) = read_exr(&dir.join("t.exr"));
+        assert!(channel(&chans, "Y").iter().all(|v| *v == want), "frame {frame:?}: {:?}", channel(&chans, "Y"));
+    }
+    let out = tessera()
+        .current_dir(&dir)
+        .args(["bake", "t.mtlx", "--element", "g/out", "--res", "2", "--out", "u.exr", "--frame", "soon"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a frame number"));
+    assert!(!dir.join("u.exr").exists());
+}

@@ -263,6 +263,53 @@ impl<'a, 'i> Importer<'a, 'i> {
         }
     }
 
+    /// `frame` and `time`, folded at load: the frame rendered ([`LoadOptions::frame`], 1 unless
+    /// set, as in MaterialX's viewers) and its time in seconds, `frame / fps` (a `divide` node
+    /// where `fps` is connected; 0 at 0 fps, as every division by zero).
+    ///
+    /// [`LoadOptions::frame`]: super::LoadOptions::frame
+    fn application_node(
+        &mut self,
+        scope: usize,
+        q: &str,
+        el: XNode<'a, 'i>,
+        category: &str,
+    ) -> Result<Option<Source>, Fail> {
+        if !nodes::FOLDED_AT_LOAD.contains(&category) {
+            return Ok(None);
+        }
+        if self.type_name(el) != Some("float") {
+            let found = self.type_name(el).unwrap_or("no type");
+            return Err(
+                self.hard(el, LoadErrorKind::Structure(format!("`{q}`: `{category}` is a float, not a {found}")))
+            );
+        }
+        let frame = self.opts.frame.unwrap_or(1.0);
+        if category == "frame" {
+            return Ok(Some(Source::Constant(Value::float(frame))));
+        }
+        let mut fps = Source::Constant(Value::float(24.0));
+        for inp in self.inputs_of(el) {
+            let iname = self.input_name(el, category, inp);
+            if iname != "fps" {
+                let f = self.unsupported(category, q, no_such_input(category, iname, &["fps"]), inp);
+                return Err(f);
+            }
+            if let Some(src) = self.input_source(scope, inp)? {
+                fps = src;
+            }
+        }
+        if let Source::Constant(v) = &fps {
+            let t = if v.v[0] == 0.0 { 0.0 } else { frame / v.v[0] };
+            return Ok(Some(Source::Constant(Value::float(t))));
+        }
+        let inputs = [("in1", Source::Constant(Value::float(frame))), ("in2", fps)];
+        match self.builder.add_node(q, "divide", ValueType::Float, &inputs, Vec::new()) {
+            Ok(id) => Ok(Some(Source::Node { node: id, channel: None })),
+            Err(e) => Err(self.hard(el, e.into())),
+        }
+    }
+
     fn make_node(&mut self, scope: usize, q: &str, el: XNode<'a, 'i>) -> Result<Source, Fail> {
         let category = self.category(el);
         let tyname = self.type_name(el).unwrap_or("");
@@ -270,6 +317,9 @@ impl<'a, 'i> Importer<'a, 'i> {
             return self.legacy_swizzle(scope, q, el);
         }
         if let Some(src) = self.matrix_reader(scope, q, el, category)? {
+            return Ok(src);
+        }
+        if let Some(src) = self.application_node(scope, q, el, category)? {
             return Ok(src);
         }
         let kind = self.resolve_def(scope, el)?;

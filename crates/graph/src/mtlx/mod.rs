@@ -86,6 +86,8 @@ pub struct LoadOptions {
     /// Instead of failing on unsupported nodes, leave out every output that depends on one
     /// (listed by [`Document::skipped`]). Malformed documents still fail.
     pub lenient: bool,
+    /// The frame that `frame` and `time` nodes read (1 when not set).
+    pub frame: Option<f32>,
 }
 
 /// Parses a MaterialX `value` string of type `ty`.

@@ -1,5 +1,5 @@
 //! Coordinates, geometry and constants: `texcoord`, `position`, `normal`, `tangent`,
-//! `bitangent`, `geompropvalue`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
+//! `bitangent`, `geompropvalue`, `geomcolor`, `constant`, `place2d`, `rotate2d`, `rotate3d`,
 //! `transformpoint`, `transformvector`, `transformnormal`, `transformmatrix`, `dot`.
 //!
 //! | node | inputs (default) | filtered evaluation |
@@ -9,6 +9,7 @@
 //! | `normal` | `space` (`object`) | mean `N`, gradients from `∂N/∂u`, `∂N/∂v`, variance as `position` |
 //! | `tangent`, `bitangent` | `space` (`object`), `index` (0) | the frame vector at the centre, zero spread (its variation across a footprint is not tracked) |
 //! | `geompropvalue` | `geomprop` (string), `default` (0) | uv sets (`UV0`, `uv`, `st`, `texcoord`, …) as `texcoord`; `P`/`position`/`Pobject`/`Pworld`, `N`/`normal`/…, `tangent`/…, `bitangent`/… (vector3) as those nodes; any other name (or type) gives `default`, with a warning |
+//! | `geomcolor` (float, color3, color4) | `index` (0) | 0, with a warning: tessera's shapes carry no vertex colours |
 //! | `constant` | `value` (0) | exact, zero spread |
 //! | `place2d` | `texcoord` (UV0), `pivot` (0,0), `scale` (1,1), `rotate` (0°), `offset` (0,0), `operationorder` (0 = SRT) | affine in `texcoord`: exact when the other inputs are uniform, cubature otherwise |
 //! | `rotate2d` | `in` (0,0), `amount` (0°) | linear: exact for uniform `amount` |
@@ -17,6 +18,7 @@
 //! | `transformnormal` | `in` (0,0,1), `fromspace`, `tospace` | `normalize(in)` (MaterialX normalises), by cubature |
 //! | `transformmatrix` | `in` (0), `mat` (identity; a matrix folded at load, see [`crate::matrix`]) | affine `v · M` (vector2 with a matrix33 and vector3 with a matrix44 extended by a homogeneous 1): exact |
 //! | `dot` | `in` (0) | pass-through |
+//! | `blur` | `in` (0), `size` (0), `filtertype` | pass-through, as MaterialX's GLSL (which blurs image inputs only), with a warning unless `size` is 0: the footprint filtering every node gets is the blur tessera applies |
 //!
 //! Spaces: tessera transforms meshes and shapes to world space at load and keeps no object
 //! transform, so `object`, `model` and `world` are one space here: `position` and `normal`
@@ -46,6 +48,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "tangent",
     "bitangent",
     "geompropvalue",
+    "geomcolor",
     "constant",
     "place2d",
     "rotate2d",
@@ -55,6 +58,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "transformnormal",
     "transformmatrix",
     "dot",
+    "blur",
 ];
 
 /// Geometry operations.
@@ -68,6 +72,8 @@ pub enum GeometryOp {
     PropUv,
     /// `geompropvalue` that tessera cannot provide: its `default`, and why.
     PropDefault(String),
+    /// A property with no default that tessera's shapes do not carry (`geomcolor`): 0, and why.
+    Absent(String),
     /// `rotate3d`
     Rotate3d,
     /// `transformpoint`, `transformvector` (identity between tessera's spaces).
@@ -89,6 +95,8 @@ pub enum GeometryOp {
     Rotate2d,
     /// `dot`
     Dot,
+    /// `blur`: `in` passed through, with a warning where `size` asks for a blur.
+    Blur(Option<String>),
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -100,6 +108,9 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "position" | "normal" => (&[], &["space"], v3),
         "tangent" | "bitangent" => (&[inp!("index", Int, Zero)], &["space"], v3),
         "geompropvalue" => (&[inp!("default", Out, Zero)], &["geomprop"], types::numeric),
+        "geomcolor" => (&[inp!("index", Int, Zero)], &[], |t| {
+            matches!(t, ValueType::Float | ValueType::Color3 | ValueType::Color4)
+        }),
         "constant" => (&[inp!("value", Out, Zero)], &[], types::numeric),
         "place2d" => (
             &[
@@ -123,6 +134,7 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             matches!(t, ValueType::Vector2 | ValueType::Vector3 | ValueType::Vector4)
         }),
         "dot" => (&[inp!("in", Out, Zero)], &[], types::numeric),
+        "blur" => (&[inp!("in", Out, Zero), inp!("size", Float, Zero)], &["filtertype"], types::float_or_vector),
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
@@ -201,6 +213,12 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
                 )),
             }
         }
+        "geomcolor" => {
+            let index = constant_index(&srcs[0])?;
+            GeometryOp::Absent(format!(
+                "vertex colour set {index} is not carried by tessera's shapes; `geomcolor` gives 0"
+            ))
+        }
         "transformmatrix" => {
             let dim = ty.channels();
             let mat = params
@@ -220,6 +238,14 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
             GeometryOp::TransformMatrix { lin, t }
         }
         "constant" => GeometryOp::Constant,
+        "blur" => GeometryOp::Blur(match &srcs[1] {
+            Source::Constant(v) if v.v[0] == 0.0 => None,
+            _ => Some(
+                "`blur` passes `in` through unblurred, as MaterialX's GLSL does for procedural inputs (tessera \
+                 filters every node to its footprint already)"
+                    .to_string(),
+            ),
+        }),
         "place2d" => GeometryOp::Place2d,
         "rotate2d" => GeometryOp::Rotate2d,
         "rotate3d" => GeometryOp::Rotate3d,
@@ -245,7 +271,8 @@ pub(crate) fn reads_geometry(op: &GeometryOp) -> bool {
 pub(crate) fn warning(op: &GeometryOp) -> Option<String> {
     match op {
         GeometryOp::Texcoord(w) => w.clone(),
-        GeometryOp::PropDefault(w) => Some(w.clone()),
+        GeometryOp::PropDefault(w) | GeometryOp::Absent(w) => Some(w.clone()),
+        GeometryOp::Blur(w) => w.clone(),
         _ => None,
     }
 }
@@ -301,7 +328,8 @@ pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut C
         }
         GeometryOp::Prop(p) => geomprop(*p, ctx),
         GeometryOp::PropDefault(_) => ins[0],
-        GeometryOp::Identity => ins[0],
+        GeometryOp::Absent(_) => Filtered::zero(ty),
+        GeometryOp::Identity | GeometryOp::Blur(_) => ins[0],
         GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
         GeometryOp::Rotate3d => rotate3d(ins, ctx),
         GeometryOp::TransformMatrix { lin, t } => {

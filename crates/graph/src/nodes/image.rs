@@ -1,9 +1,11 @@
-//! Image lookups: `image`, `tiledimage`.
+//! Image lookups: `image`, `tiledimage`, `latlongimage`, `triplanarprojection`.
 //!
 //! | node | inputs (default) | unfiltered (MaterialX 1.39) | filtered evaluation |
 //! |---|---|---|---|
 //! | `image` | `file`, `layer`, `default` (0), `texcoord` (UV0), `uaddressmode` / `vaddressmode` (periodic), `filtertype`, `framerange`, `frameoffset` (0), `frameendaction` | bilinear lookup of the file at `texcoord`, `v = 0` the bottom row of the file; `constant` address mode: `default` outside [0, 1]; `clamp`, `periodic`, `mirror` wrap as GL does (clamp is exact only while the footprint stays within a few texels of the image: coarse levels clamp to their own edge texels); a missing channel reads 0 (alpha 1), a grey file fills r, g, b | up to σ = 1 texel (major axis): the exact Gaussian average of the bilinear reconstruction (separable: each texel's tent integrated in closed form, ±4σ); beyond, a mip pyramid (box levels halving each axis, exact fractional boxes for odd sizes, built at load): the same exact average at levels ⌊lod⌋ and ⌊lod⌋+1, lod = log2 σ (σ = 1–2 texels there), less the 1/4 texel² a level's box and tent already spread, blended linearly in lod; gradient exact (the tents' derivatives); variance `max(gᵀΣg, E[x²] − E[x]²)` from a pyramid of squares; the constant mode's `default` blended by the footprint's mass outside [0, 1] (Φ per axis) |
 //! | `tiledimage` | `file`, `default` (0), `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `realworldimagesize` (1,1), `realworldtilesize` (1,1), `filtertype`, `framerange`, `frameoffset` (0), `frameendaction` | `image` (periodic) at `(t·uvtiling − uvoffset) / realworldimagesize · realworldtilesize` | the coordinate exactly (affine), then as `image` |
+//! | `latlongimage` (color3) | `file`, `default` (0), `viewdir` (0, 0, 1), `rotation` (0°) | `image` (u periodic, v mirror) at longitude `0.5 − atan2(d.x, d.z)/2π + rotation/360` and latitude `0.5 + asin(d.y)/π` (MaterialX's `NG_latlongimage`) | the coordinate by cubature over `viewdir` and `rotation`, the longitude unwrapped around the mean direction's (a footprint across the seam is not averaged around the circle), then as `image` |
+//! | `triplanarprojection` | `filex`, `filey`, `filez`, `default` (0), `position` (P), `normal` (N), `upaxis` (2), `blend` (1), … | three periodic `image`s at `(y, z)`, `(x, z)`, `(x, y)` of `position` (for `upaxis` 2; 1: `(z, y)`, `(x, z)`, `(x, y)`; 0: `(z, y)`, `(z, x)`, `(−y, x)`), weighted by `w = |n|/Σ|n|` of the normalised normal raised to `1/clamp(blend, 0.03, 1)` and renormalised (MaterialX's graph); an axis whose file is empty reads `default` | each lookup at the position's own footprint (exact coordinates), the weights by cubature over the normal and `blend`, their products by Gaussian product moments |
 //!
 //! Files: PNG (8 or 16 bit) and OpenEXR through the `image` crate. `colorspace="srgb_texture"`
 //! (on the input or inherited from an enclosing element) is converted to linear at load, before
@@ -19,7 +21,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock, Weak};
 
-pub(crate) const CATEGORIES: &[&str] = &["image", "tiledimage"];
+pub(crate) const CATEGORIES: &[&str] = &["image", "tiledimage", "latlongimage", "triplanarprojection"];
+
+/// The three lookups of a `triplanarprojection` (x, y, z), `None` for an empty file name.
+pub type Triplanar = [Option<Arc<Texture>>; 3];
 
 /// How a texture coordinate outside [0, 1] is mapped.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -207,10 +212,33 @@ impl Texture {
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     use Def::*;
     use InType::*;
+    let mut types: fn(ValueType) -> bool = types::float_or_vector;
     let (inputs, params): (&'static [_], &'static [&'static str]) = match category {
         "image" => (
             &[inp!("default", Out, Zero), inp!("texcoord", V2, Uv), inp!("frameoffset", Int, Zero)],
             &["file", "layer", "uaddressmode", "vaddressmode", "filtertype", "framerange", "frameendaction"],
+        ),
+        "latlongimage" => {
+            types = types::color3;
+            (
+                &[
+                    inp!("default", Out, Zero),
+                    inp!("viewdir", V3, Triple(0.0, 0.0, 1.0)),
+                    inp!("rotation", Float, Zero),
+                ],
+                &["file"],
+            )
+        }
+        "triplanarprojection" => (
+            &[
+                inp!("default", Out, Zero),
+                inp!("position", V3, Geom(crate::graph::GeomProp::Position)),
+                inp!("normal", V3, Geom(crate::graph::GeomProp::Normal)),
+                inp!("upaxis", Int, Splat(2.0)),
+                inp!("blend", Float, One),
+                inp!("frameoffset", Int, Zero),
+            ],
+            &["filex", "filey", "filez", "layerx", "layery", "layerz", "filtertype", "framerange", "frameendaction"],
         ),
         "tiledimage" => (
             &[
@@ -227,10 +255,41 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
-    Some(NodeDef { category, inputs, params, types: types::float_or_vector, build })
+    Some(NodeDef { category, inputs, params, types, build })
+}
+
+/// The file of parameter `name`, with whether it is sRGB-encoded (`None`: no such parameter).
+fn file_param<'p>(params: &'p [Param], name: &str) -> Option<(&'p Path, bool)> {
+    params.iter().find_map(|p| match p {
+        Param::File { name: n, path, colorspace } if n == name => Some((path.as_path(), colorspace == "srgb_texture")),
+        _ => None,
+    })
 }
 
 fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[Param]) -> Result<Op, String> {
+    let texture = |path: &Path, srgb: bool, u: Address, v: Address| -> Result<Arc<Texture>, String> {
+        Ok(Arc::new(Texture { pyramid: pyramid(path, srgb)?, u, v, tiled: false }))
+    };
+    if category == "latlongimage" {
+        return match file_param(params, "file") {
+            Some((p, srgb)) if !p.as_os_str().is_empty() => {
+                Ok(Op::LatLong(texture(p, srgb, Address::Periodic, Address::Mirror)?))
+            }
+            _ => Ok(Op::Default("its `file` is empty: it gives its `default`".into())),
+        };
+    }
+    if category == "triplanarprojection" {
+        let mut axes: Triplanar = [None, None, None];
+        for (axis, name) in axes.iter_mut().zip(["filex", "filey", "filez"]) {
+            if let Some((p, srgb)) = file_param(params, name).filter(|(p, _)| !p.as_os_str().is_empty()) {
+                *axis = Some(texture(p, srgb, Address::Periodic, Address::Periodic)?);
+            }
+        }
+        if axes.iter().all(Option::is_none) {
+            return Ok(Op::Default("its files are empty: it gives its `default`".into()));
+        }
+        return Ok(Op::Triplanar(Arc::new(axes)));
+    }
     let mut file = None;
     let (mut u, mut v) = (Address::Periodic, Address::Periodic);
     for p in params {
@@ -379,8 +438,6 @@ pub(crate) fn filtered_rgba(t: &Texture, m: DVec2, s: DVec2, point: bool) -> [[f
 }
 
 pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    let n = ty.channels();
-    let default = &ins[0];
     // The lookup coordinate (tiledimage: an affine map of texcoord, exact).
     let (mut scale, mut offset) = (DVec2::ONE, DVec2::ZERO);
     if t.tiled {
@@ -389,7 +446,83 @@ pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         scale = tiling / img * tile;
         offset = off / img * tile;
     }
-    let tc = &ins[1];
+    lookup(t, ty, &ins[0], &ins[1], scale, offset, ctx)
+}
+
+/// `latlongimage`: the lookup at the direction's longitude and latitude.
+pub(crate) fn eval_latlong(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    use std::f64::consts::TAU;
+    let d = &ins[1];
+    let xs = [d.ch[0], d.ch[1], d.ch[2], ins[2].ch[0]];
+    // The longitude is unwrapped around the mean direction's, so that the cubature's points on
+    // both sides of the seam stay neighbours (the image is periodic in u).
+    let a0 = (d.ch[0].mean as f64).atan2(d.ch[2].mean as f64);
+    let lon = move |p: &[f64]| {
+        let da = p[0].atan2(p[2]) - a0;
+        (a0 + da - TAU * (da / TAU).round()) * -0.159_154_94 + 0.5 + p[3] * 0.002_777_78
+    };
+    let lat = |p: &[f64]| p[1].clamp(-1.0, 1.0).asin() * 0.318_309_89 + 0.5;
+    let mut tc = Filtered::zero(ValueType::Vector2);
+    tc.ch[0] = crate::moments::nary(&xs, lon);
+    tc.ch[1] = crate::moments::nary(&xs, lat);
+    lookup(t, ty, &ins[0], &tc, DVec2::ONE, DVec2::ZERO, ctx)
+}
+
+/// Weight `i` of `triplanarprojection` from `(normal, blend)`, as MaterialX's graph computes it.
+fn triplanar_weight(q: &[f64], i: usize) -> f64 {
+    use crate::moments::safe_div;
+    let n = glam::DVec3::new(q[0], q[1], q[2]).normalize_or_zero().abs();
+    let w = [n.x, n.y, n.z].map(|a| safe_div(a, n.x + n.y + n.z));
+    let e = 1.0 / q[3].clamp(0.03, 1.0);
+    let p = w.map(|x| super::math::power_point(x, e, false));
+    safe_div(p[i], p[0] + p[1] + p[2])
+}
+
+/// `triplanarprojection`: three lookups at the position's planar coordinates, blended by the
+/// normal.
+pub(crate) fn eval_triplanar(axes: &Triplanar, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let (default, p, nrm) = (&ins[0], &ins[1], &ins[2]);
+    let pair = |a: Moments, b: Moments| Filtered {
+        ty: ValueType::Vector2,
+        ch: [a, b, Moments::default(), Moments::default()],
+    };
+    let (x, y, z) = (p.ch[0], p.ch[1], p.ch[2]);
+    let up = ins[3].ch[0].mean;
+    let coords = if up < 1.0 {
+        [pair(z, y), pair(z, x), pair(crate::moments::affine(y, -1.0, 0.0), x)]
+    } else if up < 2.0 {
+        [pair(z, y), pair(x, z), pair(x, y)]
+    } else {
+        [pair(y, z), pair(x, z), pair(x, y)]
+    };
+    let xs = [nrm.ch[0], nrm.ch[1], nrm.ch[2], ins[4].ch[0]];
+    let mut out = Filtered::zero(ty);
+    for (i, (axis, tc)) in axes.iter().zip(&coords).enumerate() {
+        let w = crate::moments::nary(&xs, |q| triplanar_weight(q, i));
+        let img = match axis {
+            Some(t) => lookup(t, ty, default, tc, DVec2::ONE, DVec2::ZERO, ctx),
+            None => *default,
+        };
+        for k in 0..ty.channels() {
+            let term = crate::moments::mul(img.at(k), w, ctx.fp);
+            out.ch[k] = crate::moments::add_scaled(out.ch[k], term, 1.0, ctx.fp);
+        }
+    }
+    out
+}
+
+/// The filtered lookup of `t` at `tc · scale − offset`, with `default` where the constant
+/// address mode leaves the image.
+fn lookup(
+    t: &Texture,
+    ty: ValueType,
+    default: &Filtered,
+    tc: &Filtered,
+    scale: DVec2,
+    offset: DVec2,
+    ctx: &mut Ctx,
+) -> Filtered {
+    let n = ty.channels();
     let m = DVec2::new(tc.ch[0].mean as f64, tc.ch[1].mean as f64) * scale - offset;
     let s = DVec2::new(tc.ch[0].sigma() as f64, tc.ch[1].sigma() as f64) * scale.abs();
     let j = [tc.ch[0].grad * scale.x as f32, tc.ch[1].grad * scale.y as f32];

@@ -13,6 +13,7 @@
 //! | `floor`, `ceil`, `round`, `fract`, `modulo` | `in`/`in1`, `in2` (1) | closed form: step masses (σ < 0.4 periods) or damped Fourier series of the sawtooth |
 //! | `sign` | `in` (0) | `2Φ(m/σ) − 1` |
 //! | `sin`, `cos` | `in` (0) | closed form (`e^{−σ²/2}` damping) |
+//! | `trianglewave` (float) | `in` (0) | `0.5 − |mod(|x|, 1) − 0.5|`: closed form (linear pieces under the Gaussian below 0.4 periods, damped Fourier series above) |
 //! | `exp` | `in` (0) | closed form (log-normal) |
 //! | `sqrt`, `ln` (`in` = 1), `power` (`in2` = 1), `tan`, `asin`, `acos` | | 5-point Gauss–Hermite (uniform exponent), cubature otherwise, on the total point functions: `sqrt` of a negative is 0, `ln` of x ≤ 0 is ln 1e-30, `asin`/`acos` clamp to [−1, 1], `power` is OSL's `safe_pow` (x⁰ = 1, 0ʸ = 0, a negative base with a fractional exponent 0) |
 //! | `atan2` | `iny` (0), `inx` (1) | cubature |
@@ -29,7 +30,7 @@ use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{self, poly, poly_shift_scale, Piece};
 use crate::graph::Source;
 use crate::moments::{
-    add_scaled, affine, chain, frac_moments, mix, mul, nary, safe_div, sat, sat64, scale_grad, unary,
+    add_scaled, affine, chain, frac_moments, mix, mul, nary, safe_div, sat, sat64, scale_grad, tri_moments, unary,
 };
 use crate::value::{Filtered, Footprint, Moments, ValueType};
 use glam::Vec2;
@@ -77,6 +78,7 @@ pub(crate) const CATEGORIES: &[&str] = &[
     "ifgreatereq",
     "switch",
     "ifequal",
+    "trianglewave",
 ];
 
 /// Math operations.
@@ -166,6 +168,8 @@ pub enum MathOp {
     Xor,
     /// not
     Not,
+    /// trianglewave
+    TriangleWave,
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -185,6 +189,7 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             (unary_in, types::numeric)
         }
         "ln" => (&[inp!("in", Out, One)], types::numeric),
+        "trianglewave" => (unary_in, types::float),
         "invert" => (&[inp!("in", Out, Zero), inp!("amount", OutOrFloat, One)], types::numeric),
         "atan2" => (&[inp!("iny", Out, Zero), inp!("inx", Out, One)], types::numeric),
         "clamp" => {
@@ -295,6 +300,7 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "or" => Or,
         "xor" => Xor,
         "not" => Not,
+        "trianglewave" => TriangleWave,
         _ => IfEqual,
     }))
 }
@@ -302,6 +308,17 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
 #[inline]
 fn uniform(m: &Moments) -> bool {
     m.var == 0.0 && m.grad == Vec2::ZERO
+}
+
+/// `|x|`, in closed form (two linear pieces under the Gaussian).
+pub(crate) fn absval(x: Moments) -> Moments {
+    pieces_of(
+        x,
+        &[
+            Piece { lo: f64::NEG_INFINITY, hi: 0.0, p: poly(&[0.0, -1.0]) },
+            Piece { lo: 0.0, hi: f64::INFINITY, p: poly(&[0.0, 1.0]) },
+        ],
+    )
 }
 
 fn pieces_of(x: Moments, pieces: &[Piece]) -> Moments {
@@ -482,13 +499,7 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
         Modulo => modulo(a, x[1], fp),
         Fract => fract_of(a),
         Invert => add_scaled(x[1], a, -1.0, fp),
-        Absval => pieces_of(
-            a,
-            &[
-                Piece { lo: f64::NEG_INFINITY, hi: 0.0, p: poly(&[0.0, -1.0]) },
-                Piece { lo: 0.0, hi: f64::INFINITY, p: poly(&[0.0, 1.0]) },
-            ],
-        ),
+        Absval => absval(a),
         Sign => {
             if a.var == 0.0 {
                 Moments::constant(if a.mean > 0.0 {
@@ -518,6 +529,7 @@ fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
         Sqrt => unary(a, |v| v.max(0.0).sqrt(), |v| if v > 0.0 { 0.5 / v.sqrt() } else { 0.0 }),
         Ln => unary(a, |v| v.max(1e-30).ln(), |v| 1.0 / v.max(1e-30)),
         Exp => exp_of(a),
+        TriangleWave => chain(a, tri_moments(a.mean as f64, a.sigma() as f64)),
         Clamp => {
             if uniform(&x[1]) && uniform(&x[2]) {
                 clamp_const(a, x[1].mean as f64, x[2].mean as f64)

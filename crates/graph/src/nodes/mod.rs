@@ -7,6 +7,7 @@
 
 pub(crate) mod channel;
 pub(crate) mod color;
+pub(crate) mod composite;
 pub(crate) mod geometry;
 pub(crate) mod hash;
 pub(crate) mod hextile;
@@ -17,6 +18,7 @@ pub(crate) mod noise;
 pub(crate) mod normal;
 pub(crate) mod pattern;
 pub(crate) mod shape;
+pub(crate) mod vector;
 
 #[doc(hidden)]
 pub use math::set_unguarded_power;
@@ -163,7 +165,9 @@ impl InputSpec {
             Def::Splat(x) => Value::splat(ty, x),
             Def::Pair(a, b) => Value::new(ValueType::Vector2, &[a, b]),
             Def::Triple(a, b, c) => Value::new(ty, &[a, b, c]),
-            Def::Quad(a, b, c, d) => Value::new(ty, &[a, b, c, d]),
+            // A four-channel default serves a three-channel variant too (`colorcorrect`'s `in`
+            // is (1, 1, 1) for color3 and (1, 1, 1, 0) for color4).
+            Def::Quad(a, b, c, d) => Value::new(ty, &[a, b, c, d][..ty.channels().min(4)]),
             Def::Uv => return Source::Texcoord,
             Def::Geom(g) => return Source::Geometry(g),
         };
@@ -251,10 +255,18 @@ pub enum Op {
     Channel(channel::ChannelOp),
     /// Colour adjustment nodes.
     Color(color::ColorOp),
+    /// Compositing: blends, the Porter–Duff alpha operators, masks, premultiplication.
+    Composite(composite::CompositeOp),
+    /// `crossproduct`, `reflect`, `refract`.
+    Vector(vector::VectorOp),
     /// `normalmap`, `heighttonormal`.
     Normal(normal::NormalOp),
     /// `image`, `tiledimage`.
     Image(Arc<image::Texture>),
+    /// `latlongimage`.
+    LatLong(Arc<image::Texture>),
+    /// `triplanarprojection`.
+    Triplanar(Arc<image::Triplanar>),
     /// `hextiledimage`.
     HexTile(Arc<hextile::HexTile>),
     /// A node that evaluates its `default` input (its first), as MaterialX's image nodes do
@@ -283,7 +295,11 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
         Op::Math(m) => math::eval(m, ty, ins, ctx),
         Op::Channel(c) => channel::eval(c, ty, ins, ctx),
         Op::Color(c) => color::eval(c, ty, ins, ctx),
+        Op::Composite(c) => composite::eval(c, ty, ins, ctx),
+        Op::Vector(v) => vector::eval(v, ty, ins, ctx),
         Op::Image(t) => image::eval(t, ty, ins, ctx),
+        Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
+        Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
         Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
         Op::Default(_) => ins[0],
@@ -341,6 +357,8 @@ pub fn supported() -> Vec<&'static str> {
         math::CATEGORIES,
         channel::CATEGORIES,
         color::CATEGORIES,
+        composite::CATEGORIES,
+        vector::CATEGORIES,
         image::CATEGORIES,
         hextile::CATEGORIES,
         normal::CATEGORIES,
@@ -348,9 +366,15 @@ pub fn supported() -> Vec<&'static str> {
         v.extend_from_slice(f);
     }
     v.extend_from_slice(crate::matrix::FOLDED);
+    v.extend_from_slice(FOLDED_AT_LOAD);
     v.sort_unstable();
     v
 }
+
+/// Nodes of the application rather than the surface, which the MaterialX reader folds to
+/// constants at load: `frame` (the frame rendered, [`crate::mtlx::LoadOptions::frame`]) and
+/// `time` (`frame / fps`).
+pub const FOLDED_AT_LOAD: &[&str] = &["frame", "time"];
 
 /// Supported categories as one comma-separated line.
 pub fn supported_list() -> String {
@@ -367,6 +391,8 @@ pub fn definition(category: &str) -> Option<NodeDef> {
         .or_else(|| math::definition(category))
         .or_else(|| channel::definition(category))
         .or_else(|| color::definition(category))
+        .or_else(|| composite::definition(category))
+        .or_else(|| vector::definition(category))
         .or_else(|| image::definition(category))
         .or_else(|| hextile::definition(category))
         .or_else(|| normal::definition(category))
@@ -411,7 +437,8 @@ mod tests {
     /// The evaluator's fixed input array holds every definition's inputs.
     #[test]
     fn every_definition_fits_the_input_array() {
-        for c in super::supported().into_iter().filter(|c| !crate::matrix::FOLDED.contains(c)) {
+        let folded = |c: &&str| crate::matrix::FOLDED.contains(c) || super::FOLDED_AT_LOAD.contains(c);
+        for c in super::supported().into_iter().filter(|c| !folded(c)) {
             let d = super::definition(c).unwrap();
             assert!(d.inputs.len() <= super::MAX_INPUTS, "{c}: {} inputs", d.inputs.len());
         }

@@ -1,9 +1,10 @@
-//! Normal maps: `normalmap`, `heighttonormal`.
+//! Normal maps: `normalmap`, `heighttonormal`, `bump`.
 //!
 //! | node | inputs (default) | unfiltered (MaterialX 1.39) | filtered evaluation |
 //! |---|---|---|---|
 //! | `normalmap` (vector3) | `in` (0.5, 0.5, 1), `scale` (1; float or vector2), `normal` (0,0,1), `tangent` (1,0,0), `bitangent` (0,1,0) | `v = 2·in − 1` (`(0,0,1)` for `in = 0`), `normalize(T·v.x·scale.x + B·v.y·scale.y + N·v.z)` | per output channel, spherical cubature over the varying input channels ([`moments::nary`](crate::moments::nary)) |
 //! | `heighttonormal` (vector3) | `in` (0), `scale` (1), `texcoord` (UV0) | `normalize(−k ∂h/∂tₓ, −k ∂h/∂t_y, 1)·½ + ½`, `k = scale/16`: what MaterialX's screen-space construction (`cross` of the screen tangents `(∂t/∂s, k ∂h/∂s)`) reduces to, independent of the pixel size; `(0,0,1)` where `texcoord` is degenerate | the normal of the filtered height: `∂h/∂t` from the gradients of the filtered `in` and `texcoord` means (`∂h/∂t = J⁻ᵀ ∂h/∂uv`); its spread over the footprint is not modelled (variance 0). Evaluation keeps gradients for point footprints when this node is involved |
+//! | `bump` (vector3) | `height` (0), `scale` (1), `normal`, `tangent`, `bitangent` (the shading frame) | MaterialX's `NG_bump`: `normalmap` of `heighttonormal(height)` (scale 1, texcoord UV0) by `scale` in the given frame | as the two nodes: the normal of the filtered height, then cubature; gradients kept at point footprints |
 //!
 //! `space` (an input MaterialX 1.39 removed): `tangent` (or absent) is the tangent-space map
 //! above; `object`, as MaterialX's upgrade of older documents rewrites it, is
@@ -14,12 +15,12 @@
 //! normal, tangent and bitangent, which the renderer does not pass to graphs yet).
 
 use super::{inp, Ctx, Def, InType, NodeDef, Op, Param};
-use crate::graph::Source;
+use crate::graph::{GeomProp, Source};
 use crate::moments;
 use crate::value::{Filtered, Moments, ValueType};
 use glam::Vec3;
 
-pub(crate) const CATEGORIES: &[&str] = &["normalmap", "heighttonormal"];
+pub(crate) const CATEGORIES: &[&str] = &["normalmap", "heighttonormal", "bump"];
 
 /// Normal-map operations.
 #[derive(Debug)]
@@ -30,6 +31,8 @@ pub enum NormalOp {
     ObjectSpace,
     /// `heighttonormal`
     HeightToNormal,
+    /// `bump`
+    Bump,
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
@@ -44,6 +47,13 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             inp!("bitangent", V3, Triple(0.0, 1.0, 0.0)),
         ],
         "heighttonormal" => &[inp!("in", Float, Zero), inp!("scale", Float, One), inp!("texcoord", V2, Uv)],
+        "bump" => &[
+            inp!("height", Float, Zero),
+            inp!("scale", Float, One),
+            inp!("normal", V3, Geom(GeomProp::Normal)),
+            inp!("tangent", V3, Geom(GeomProp::Tangent)),
+            inp!("bitangent", V3, Geom(GeomProp::Bitangent)),
+        ],
         _ => return None,
     };
     let category = CATEGORIES.iter().copied().find(|c| *c == category)?;
@@ -53,6 +63,9 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
 fn build(category: &str, _: ValueType, types: &[ValueType], _: &[Source], params: &[Param]) -> Result<Op, String> {
     if category == "heighttonormal" {
         return Ok(Op::Normal(NormalOp::HeightToNormal));
+    }
+    if category == "bump" {
+        return Ok(Op::Normal(NormalOp::Bump));
     }
     let space = params.iter().find_map(|p| match p {
         Param::Str { name, value } if name == "space" => Some(value.trim()),
@@ -92,7 +105,13 @@ pub fn heighttonormal_point(dh: [f64; 2], k: f64) -> [f64; 3] {
     [n.x * 0.5 + 0.5, n.y * 0.5 + 0.5, n.z * 0.5 + 0.5]
 }
 
-pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], _: &mut Ctx) -> Filtered {
+pub(crate) fn eval(op: &NormalOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    if let NormalOp::Bump = op {
+        let one = Filtered::constant(crate::value::Value::float(1.0));
+        let tc = super::geometry::texcoord(ctx);
+        let h = eval(&NormalOp::HeightToNormal, ValueType::Vector3, &[ins[0], one, tc], ctx);
+        return eval(&NormalOp::NormalMap, ty, &[h, ins[1], ins[2], ins[3], ins[4]], ctx);
+    }
     if let NormalOp::HeightToNormal = op {
         let gh = ins[0].ch[0].grad.as_dvec2();
         let t = &ins[2];

@@ -1,5 +1,5 @@
 //! Shapes, ramps, splits and random values: `checkerboard`, `ramplr`, `ramptb`, `ramp4`, `ramp`,
-//! `splitlr`, `splittb`, `randomfloat`, `randomcolor`.
+//! `ramp_gradient`, `splitlr`, `splittb`, `randomfloat`, `randomcolor`.
 //!
 //! | node | inputs (default) | unfiltered | filtered evaluation |
 //! |---|---|---|---|
@@ -9,6 +9,7 @@
 //! | `ramp` (color4) | `texcoord` (UV0), `type` (0), `interpolation` (1), `num_intervals` (2), `interval1` (0), `color1` (0,0,0,1), `interval2`…`interval10` (1), `color2`…`color10` (1,1,1,1) | see below | the ramp is a piecewise polynomial `f(x)` (degree ≤ 3) of one coordinate `x`: exact closed-form mean, variance and slope of `f(X)` for Gaussian `X` (piece moments plus the jumps' densities); `x` is exactly Gaussian for `type` 0 (`u`), and for types 1–3 its mean and variance come from cubature over the texcoord's spread (radial: unwrapped around the centre's angle and the ramp extended periodically) |
 //! | `splitlr` / `splittb` | `valuel`,`valuer` / `valuet`,`valueb` (0), `center` (0.5), `texcoord` | `valuer` where `u ≥ center` / `valuet` where `v ≥ center` | the footprint's mass beyond the split, `Φ((m − c)/σ)` |
 //! | `randomfloat` | `in` (0), `min` (0), `max` (1), `seed` (0) | cell noise of `(in, seed)` mapped to `[min, max]` | evaluated at the mean of `in` (a per-object value, normally uniform) |
+//! | `ramp_gradient` (color4) | `x` (0), `interval1` (0), `interval2` (1), `color1` (0,0,0,1), `color2` (1,1,1,1), `interpolation` (1), `prev_color` (0,0,0,1), `interval_num` (1), `num_intervals` (2) | one interval of `ramp`, as MaterialX's `NG_ramp_gradient`: `prev_color` where `interval_num ≥ num_intervals` or `x ≤ interval1`, else `mix(color1, color2, t)` with `t` the clamped linear (0) or smoothstep (1) position in the interval, or `color1` below `interval2` and `color2` from it (2) | MaterialX's graph, each step by its node's rule (`clamp`, `remap`, `smoothstep`, `switch`, `mix`, `ifgreater`, `ifgreatereq`) |
 //! | `randomcolor` | `in` (0), `huelow` (0), `huehigh` (1), `saturationlow` (0), `saturationhigh` (1), `brightnesslow` (0), `brightnesshigh` (1), `seed` (0) | HSV from three cell-noise values of `(in, seed + k)` | as `randomfloat` |
 
 //!
@@ -29,8 +30,18 @@ use crate::graph::Source;
 use crate::moments::{self, affine, chain, mix};
 use crate::value::{Filtered, Moments, ValueType};
 
-pub(crate) const CATEGORIES: &[&str] =
-    &["checkerboard", "ramplr", "ramptb", "ramp4", "ramp", "splitlr", "splittb", "randomfloat", "randomcolor"];
+pub(crate) const CATEGORIES: &[&str] = &[
+    "checkerboard",
+    "ramplr",
+    "ramptb",
+    "ramp4",
+    "ramp",
+    "ramp_gradient",
+    "splitlr",
+    "splittb",
+    "randomfloat",
+    "randomcolor",
+];
 
 /// Pattern operations.
 #[derive(Debug)]
@@ -45,6 +56,8 @@ pub enum PatternOp {
     Ramp4,
     /// `ramp`
     Ramp,
+    /// `ramp_gradient`
+    RampGradient,
     /// `splitlr`
     SplitLr,
     /// `splittb`
@@ -72,6 +85,20 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "ramplr" => {
             (&[inp!("valuel", Out, Zero), inp!("valuer", Out, Zero), inp!("texcoord", V2, Uv)], types::float_or_vector)
         }
+        "ramp_gradient" => (
+            &[
+                inp!("x", Float, Zero),
+                inp!("interval1", Float, Zero),
+                inp!("interval2", Float, One),
+                inp!("color1", Out, Quad(0.0, 0.0, 0.0, 1.0)),
+                inp!("color2", Out, One),
+                inp!("interpolation", Int, One),
+                inp!("prev_color", Out, Quad(0.0, 0.0, 0.0, 1.0)),
+                inp!("interval_num", Int, One),
+                inp!("num_intervals", Int, Splat(2.0)),
+            ],
+            |t| t == ValueType::Color4,
+        ),
         "ramptb" => {
             (&[inp!("valuet", Out, Zero), inp!("valueb", Out, Zero), inp!("texcoord", V2, Uv)], types::float_or_vector)
         }
@@ -162,6 +189,7 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "ramptb" => PatternOp::RampTb,
         "ramp4" => PatternOp::Ramp4,
         "ramp" => PatternOp::Ramp,
+        "ramp_gradient" => PatternOp::RampGradient,
         "splitlr" => PatternOp::SplitLr,
         "splittb" => PatternOp::SplitTb,
         "randomfloat" => PatternOp::RandomFloat,
@@ -556,6 +584,29 @@ fn random01(x: f32, seed: f32) -> f32 {
     cell_float(x.floor() as i32, seed.floor() as i32)
 }
 
+/// `ramp_gradient`, as MaterialX's graph composes it from other nodes.
+fn ramp_gradient(ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    use super::math::{eval as math, MathOp};
+    use ValueType::{Color4, Float};
+    let [x, i1, i2, c1, c2, interp, prev, num, count] =
+        [ins[0], ins[1], ins[2], ins[3], ins[4], ins[5], ins[6], ins[7], ins[8]];
+    let clamped = math(&MathOp::Clamp, Float, &[x, i1, i2], ctx);
+    let (zero, one) =
+        (Filtered::constant(crate::value::Value::float(0.0)), Filtered::constant(crate::value::Value::float(1.0)));
+    let linear = math(&MathOp::Remap, Float, &[clamped, i1, i2, zero, one], ctx);
+    let smooth = math(&MathOp::Smoothstep, Float, &[x, i1, i2], ctx);
+    let mut choice = [zero; 11];
+    (choice[0], choice[1], choice[10]) = (linear, smooth, interp);
+    let t = math(&MathOp::Switch, Float, &choice, ctx);
+    let blended = math(&MathOp::Mix, Color4, &[c2, c1, t], ctx);
+    let step = math(&MathOp::IfGreater, Color4, &[i2, x, c1, c2], ctx);
+    let mut choice = [Filtered::zero(Color4); 11];
+    (choice[0], choice[1], choice[2], choice[10]) = (blended, blended, step, interp);
+    let within = math(&MathOp::Switch, Color4, &choice, ctx);
+    let above = math(&MathOp::IfGreater, Color4, &[x, i1, within, prev], ctx);
+    math(&MathOp::IfGreaterEq, Color4, &[num, count, prev, above], ctx)
+}
+
 pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     let n = ty.channels();
     let mut out = match op {
@@ -581,6 +632,7 @@ pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
             mix_all(ty, &bottom, &top, t, ctx)
         }
         PatternOp::Ramp => ramp::eval(ins, ctx),
+        PatternOp::RampGradient => ramp_gradient(ins, ctx),
         PatternOp::SplitLr => {
             let t = step(ins[2].ch[0].mean, ins[3].ch[0]);
             mix_all(ty, &ins[0], &ins[1], t, ctx)

@@ -13,6 +13,8 @@
 //! | `crosshatch` (color3) | as `grid` | 1 within `thickness` of a cell diagonal of `2·fract(t·tiling − offset) − 1` | per cell, the two diagonal strips (minus their overlap) clipped to the cell, each as `circle`; the global coverage once both per-axis σ exceed 0.6 cells (Fourier modes damped below 1e-7) |
 //! | `tiledcircles` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `size` (0.5), `staggered` (false) | disk of diameter `size` in each cell (clipped to it); staggered: rows of height √3/2 shifted by ½, disks of radius `size/2` at the triangle-lattice vertices | per cell, its disks clipped to the cell, as `circle`; the global coverage beyond 0.6 cells |
 //! | `tiledhexagons` (color3) | as `tiledcircles` | as `tiledcircles` with `hexagon`s (inradius `size/2`) | as `tiledcircles` |
+//! | `cloverleaf` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.5) | the union of four disks of radius `radius/2` centred `radius/2` left, right, above and below `center` (MaterialX's `NG_cloverleaf_float`: the `max` of four `circle`s) | the union of the four disks, as `circle` with the disks' chords merged at each height |
+//! | `tiledcloverleafs` (color3) | as `tiledcircles` | as `tiledcircles` with `cloverleaf`s of `radius` `size` in the cell's [−1, 1]² frame; staggered: rows of height ½ shifted by ½ every other row, cloverleafs of `radius` `size/2` at the lattice points | as `tiledcircles` |
 //!
 //! The coverage of a convex piece `K` under `N(m, diag(sₓ², s_y²))` (correlation ignored, like
 //! the other pattern nodes; exact for axis-aligned footprints) is
@@ -20,7 +22,8 @@
 //! of `K` at height `y`, integrated over the narrower axis (20-point Gauss–Legendre on the
 //! piece's extent within ±6σ): the sharp direction is in closed form, the quadrature only sees
 //! a Gaussian-smoothed chord length. Unions are sums of disjoint pieces (inclusion–exclusion
-//! for the crosshatch's overlapping strips).
+//! for the crosshatch's overlapping strips), or, for the cloverleafs' overlapping disks, the
+//! merged chords of all pieces at each height.
 
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::gaussian::{cdf, pdf};
@@ -29,8 +32,17 @@ use crate::value::{Filtered, Moments, ValueType};
 use glam::{DVec2, Vec2};
 use std::sync::OnceLock;
 
-pub(crate) const CATEGORIES: &[&str] =
-    &["circle", "line", "hexagon", "grid", "crosshatch", "tiledcircles", "tiledhexagons"];
+pub(crate) const CATEGORIES: &[&str] = &[
+    "circle",
+    "line",
+    "hexagon",
+    "grid",
+    "crosshatch",
+    "tiledcircles",
+    "tiledhexagons",
+    "cloverleaf",
+    "tiledcloverleafs",
+];
 
 /// Shape operations.
 #[derive(Debug)]
@@ -49,13 +61,17 @@ pub enum ShapeOp {
     TiledCircles,
     /// `tiledhexagons`
     TiledHexagons,
+    /// `cloverleaf`
+    Cloverleaf,
+    /// `tiledcloverleafs`
+    TiledCloverleafs,
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     use Def::*;
     use InType::*;
     let (inputs, types): (&'static [_], fn(ValueType) -> bool) = match category {
-        "circle" | "hexagon" => {
+        "circle" | "hexagon" | "cloverleaf" => {
             (&[inp!("texcoord", V2, Uv), inp!("center", V2, Zero), inp!("radius", Float, Half)], types::float)
         }
         "line" => (
@@ -78,7 +94,7 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
             ],
             types::color3,
         ),
-        "tiledcircles" | "tiledhexagons" => (
+        "tiledcircles" | "tiledhexagons" | "tiledcloverleafs" => (
             &[
                 inp!("texcoord", V2, Uv),
                 inp!("uvtiling", V2, Pair(1.0, 1.0)),
@@ -102,6 +118,8 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "grid" => ShapeOp::Grid,
         "crosshatch" => ShapeOp::Crosshatch,
         "tiledcircles" => ShapeOp::TiledCircles,
+        "cloverleaf" => ShapeOp::Cloverleaf,
+        "tiledcloverleafs" => ShapeOp::TiledCloverleafs,
         _ => ShapeOp::TiledHexagons,
     }))
 }
@@ -139,6 +157,15 @@ fn line_point(t: Vec2, c: Vec2, r: f32, p1: Vec2, p2: Vec2) -> f32 {
     } else {
         1.0
     }
+}
+
+/// MaterialX's `NG_cloverleaf_float`: the `max` of four `circle`s of radius `r` around `2c`,
+/// read at `2t` moved by `r` along each axis.
+fn clover_point(t: Vec2, c: Vec2, r: f32) -> f32 {
+    let (t2, c2) = (t + t, c + c);
+    let leaves =
+        [Vec2::new(t2.x + r, t2.y), Vec2::new(t2.x - r, t2.y), Vec2::new(t2.x, t2.y - r), Vec2::new(t2.x, t2.y + r)];
+    leaves.iter().map(|&q| circle_point(q, c2, r)).fold(0.0, f32::max)
 }
 
 fn hexagon_point(t: Vec2, c: Vec2, r: f32) -> f32 {
@@ -185,19 +212,47 @@ fn crosshatch_point(q: Vec2, th: f32, staggered: bool) -> f32 {
 
 const ROW: f32 = 0.866025;
 
-fn tiled_point(q: Vec2, size: f32, staggered: bool, hex: bool) -> f32 {
-    let shape = |t: Vec2, r: f32| if hex { hexagon_point(t, Vec2::ZERO, r) } else { circle_point(t, Vec2::ZERO, r) };
+/// The shape a tiled pattern repeats.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Motif {
+    Circle,
+    Hexagon,
+    Clover,
+}
+
+impl Motif {
+    fn point(self, t: Vec2, r: f32) -> f32 {
+        match self {
+            Motif::Circle => circle_point(t, Vec2::ZERO, r),
+            Motif::Hexagon => hexagon_point(t, Vec2::ZERO, r),
+            Motif::Clover => clover_point(t, Vec2::ZERO, r),
+        }
+    }
+
+    /// The height of a staggered row: the triangle lattice's √3/2 for circles and hexagons, ½
+    /// for cloverleafs (as MaterialX's graphs have them).
+    fn row(self) -> f32 {
+        if self == Motif::Clover {
+            0.5
+        } else {
+            ROW
+        }
+    }
+}
+
+fn tiled_point(q: Vec2, size: f32, staggered: bool, motif: Motif) -> f32 {
     if !staggered {
         let rc = Vec2::new(fmod(q.x, 1.0), fmod(q.y, 1.0)) * 2.0 - 1.0;
-        return shape(rc, size);
+        return motif.point(rc, size);
     }
-    let dx = if fmod(q.y, 1.73205) > ROW { 0.5 } else { 0.0 };
+    let (row, period) = if motif == Motif::Clover { (0.5, 1.0) } else { (ROW, 1.73205) };
+    let dx = if fmod(q.y, period) > row { 0.5 } else { 0.0 };
     let mx = fmod(q.x + dx, 1.0);
-    let my = fmod(q.y, ROW);
+    let my = fmod(q.y, row);
     let h = size / 2.0;
-    let a = shape(Vec2::new(mx, my), h);
-    let b = shape(Vec2::new(1.0 - mx, my), h);
-    let c = shape(Vec2::new(mx - 0.5, ROW - my), h);
+    let a = motif.point(Vec2::new(mx, my), h);
+    let b = motif.point(Vec2::new(1.0 - mx, my), h);
+    let c = motif.point(Vec2::new(mx - 0.5, row - my), h);
     a.max(b).max(c)
 }
 
@@ -349,6 +404,13 @@ impl Piece {
     fn clipped(p: Prim, r: Prim) -> Piece {
         Piece { prims: [Some(p), Some(r), None], sign: 1.0 }
     }
+    /// The cloverleaf around `c` of leaves of radius `r` (≥ 0) centred `r` from `c` along
+    /// each axis, clipped to `clip`: its four disks, which overlap, for [`union_coverage`].
+    fn clover(c: DVec2, r: f64, clip: Option<Prim>, out: &mut Vec<Piece>) {
+        for d in [DVec2::X, DVec2::Y, -DVec2::X, -DVec2::Y] {
+            out.push(Piece { prims: [Some(Prim::Disk { c: c + d * r, r }), clip, None], sign: 1.0 });
+        }
+    }
     fn chord(&self, k: usize, t: f64) -> (f64, f64) {
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for p in self.prims.iter().flatten() {
@@ -447,6 +509,95 @@ fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))
 }
 
+/// The most pieces [`union_coverage`] takes (three clipped cloverleafs).
+const MAX_UNION: usize = 12;
+
+/// Coverage of the union of (possibly overlapping) pieces under `N(m, diag(s²))`, as
+/// [`coverage`] but with the chords of all pieces at each height merged into disjoint
+/// intervals first: a union with no inclusion–exclusion terms to find. The narrower axis is
+/// integrated piecewise between the pieces' extents (20-point Gauss–Legendre on each span),
+/// so that each span sees chords that begin and end only at its ends.
+fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    debug_assert!(pieces.len() <= MAX_UNION && pieces.iter().all(|p| p.sign == 1.0));
+    let pieces = &pieces[..pieces.len().min(MAX_UNION)];
+    let k = if s.x <= s.y { 0 } else { 1 };
+    let o = 1 - k;
+    let (mk, sk) = (get(m, k), get(s, k));
+    let (mo, so) = (get(m, o), get(s, o).max(1e-12));
+    // The mass of the union of the chords at height t, and its derivative in the centre.
+    let at = |t: f64| -> (f64, f64) {
+        let mut ch = [(0.0f64, 0.0f64); MAX_UNION];
+        let mut n = 0;
+        for pc in pieces {
+            let (lo, hi) = pc.chord(k, t);
+            if lo < hi {
+                ch[n] = (lo, hi);
+                n += 1;
+            }
+        }
+        let ch = &mut ch[..n];
+        ch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let (mut q, mut dq) = (0.0, 0.0);
+        let mut cur: Option<(f64, f64)> = None;
+        for &(lo, hi) in ch.iter() {
+            match cur {
+                Some((a, b)) if lo <= b => cur = Some((a, b.max(hi))),
+                _ => {
+                    if let Some((a, b)) = cur {
+                        let (p, d) = interval(a, b, mo, so);
+                        q += p;
+                        dq += d;
+                    }
+                    cur = Some((lo, hi));
+                }
+            }
+        }
+        if let Some((a, b)) = cur {
+            let (p, d) = interval(a, b, mo, so);
+            q += p;
+            dq += d;
+        }
+        (q, dq)
+    };
+    let mut g = [0.0f64; 2];
+    if sk <= 0.0 {
+        let (q, dq) = at(mk);
+        g[o] = dq;
+        return (q.clamp(0.0, 1.0), DVec2::new(g[0], g[1]));
+    }
+    // Breakpoints: the pieces' extents within ±6σ.
+    let (lo, hi) = (mk - 6.0 * sk, mk + 6.0 * sk);
+    let mut cuts = [0.0f64; 2 * MAX_UNION + 2];
+    let mut n = 0;
+    for pc in pieces {
+        let (e0, e1) = pc.extent(k);
+        for e in [e0, e1] {
+            cuts[n] = e.clamp(lo, hi);
+            n += 1;
+        }
+    }
+    let cuts = &mut cuts[..n];
+    cuts.sort_unstable_by(f64::total_cmp);
+    let mut p = 0.0;
+    for w in cuts.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if b - a <= 0.0 {
+            continue;
+        }
+        let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
+        for &(x, wt) in gauss_legendre() {
+            let t = mid + half * x;
+            let z = (t - mk) / sk;
+            let wt = wt * half * pdf(z) / sk;
+            let (q, dq) = at(t);
+            p += wt * q;
+            g[o] += wt * dq;
+            g[k] += wt * q * z / sk;
+        }
+    }
+    (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))
+}
+
 /// The footprint of a coordinate: mean, per-axis spread, Jacobian rows.
 fn coord(t: &Filtered, scale: DVec2, offset: DVec2) -> (DVec2, DVec2, [Vec2; 2]) {
     let m = DVec2::new(t.ch[0].mean as f64, t.ch[1].mean as f64) * scale - offset;
@@ -538,13 +689,13 @@ const MAX_CELLS: i64 = 48;
 #[derive(Clone, Copy)]
 enum Tiled {
     Cross { th: f64, staggered: bool },
-    Shapes { size: f64, staggered: bool, hex: bool },
+    Shapes { size: f64, staggered: bool, motif: Motif },
 }
 
 impl Tiled {
     fn row_height(&self) -> f64 {
         match *self {
-            Tiled::Shapes { staggered: true, .. } => ROW as f64,
+            Tiled::Shapes { staggered: true, motif, .. } => motif.row() as f64,
             _ => 1.0,
         }
     }
@@ -552,7 +703,7 @@ impl Tiled {
     fn point(&self, q: Vec2) -> f32 {
         match *self {
             Tiled::Cross { th, staggered } => crosshatch_point(q, th as f32, staggered),
-            Tiled::Shapes { size, staggered, hex } => tiled_point(q, size as f32, staggered, hex),
+            Tiled::Shapes { size, staggered, motif } => tiled_point(q, size as f32, staggered, motif),
         }
     }
 
@@ -572,30 +723,42 @@ impl Tiled {
                 out.push(Piece::clipped(d2, rect));
                 out.push(Piece { prims: [Some(d1), Some(d2), Some(rect)], sign: -1.0 });
             }
-            Tiled::Shapes { size, staggered, hex } => {
-                let shape = |c: DVec2, r: f64| if hex { Prim::Hex { c, r } } else { Prim::Disk { c, r: r.abs() } };
+            Tiled::Shapes { size, staggered, motif } => {
+                // `r` is the motif's radius where the cell is its own frame (a cloverleaf's
+                // leaves have half of it).
+                let mut shape = |c: DVec2, r: f64, rect: Prim| match motif {
+                    Motif::Hexagon => out.push(Piece::clipped(Prim::Hex { c, r }, rect)),
+                    Motif::Circle => out.push(Piece::clipped(Prim::Disk { c, r: r.abs() }, rect)),
+                    Motif::Clover => Piece::clover(c, r.abs() / 2.0, Some(rect), out),
+                };
                 if !staggered {
                     let rect = Prim::Rect { lo: DVec2::new(fi, fj), hi: DVec2::new(fi + 1.0, fj + 1.0) };
-                    out.push(Piece::clipped(shape(DVec2::new(fi + 0.5, fj + 0.5), size / 2.0), rect));
+                    shape(DVec2::new(fi + 0.5, fj + 0.5), size / 2.0, rect);
                     return;
                 }
-                let h = ROW as f64;
+                let h = motif.row() as f64;
                 let sh = if j.rem_euclid(2) == 1 { 0.5 } else { 0.0 };
                 let x0 = fi - sh;
                 let (y0, y1) = (fj * h, (fj + 1.0) * h);
                 let rect = Prim::Rect { lo: DVec2::new(x0, y0), hi: DVec2::new(x0 + 1.0, y1) };
                 for c in [DVec2::new(x0, y0), DVec2::new(x0 + 1.0, y0), DVec2::new(x0 + 0.5, y1)] {
-                    out.push(Piece::clipped(shape(c, size / 2.0), rect));
+                    shape(c, size / 2.0, rect);
                 }
             }
         }
+    }
+
+    /// Whether a cell's pieces overlap (cloverleafs: their leaves, and staggered ones each
+    /// other), so that the cell's coverage is that of their union.
+    fn overlaps(&self) -> bool {
+        matches!(self, Tiled::Shapes { motif: Motif::Clover, .. })
     }
 
     /// What identifies the pattern for [`Tiled::global`]'s memo.
     fn key(&self) -> (u8, u64) {
         match *self {
             Tiled::Cross { th, staggered } => (staggered as u8, th.to_bits()),
-            Tiled::Shapes { size, staggered, hex } => (2 + staggered as u8 + 2 * hex as u8, size.to_bits()),
+            Tiled::Shapes { size, staggered, motif } => (2 + staggered as u8 + 2 * motif as u8, size.to_bits()),
         }
     }
 
@@ -639,8 +802,8 @@ fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
     // only the size's square, so a negative one is its magnitude: see `pieces`).
     match pat {
         Tiled::Cross { th, .. } if th <= 0.0 => return Moments::constant(0.0),
-        Tiled::Shapes { size, hex: true, .. } if size <= 0.0 => return Moments::constant(0.0),
-        Tiled::Shapes { size, hex: false, .. } if size == 0.0 => return Moments::constant(0.0),
+        Tiled::Shapes { size, motif: Motif::Hexagon, .. } if size <= 0.0 => return Moments::constant(0.0),
+        Tiled::Shapes { size, .. } if size == 0.0 => return Moments::constant(0.0),
         _ => {}
     }
     let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
@@ -668,7 +831,7 @@ fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
             for ii in i0..=i1 {
                 pieces.clear();
                 pat.pieces(ii, jj, pieces);
-                let (q, dq) = coverage(pieces, m, s);
+                let (q, dq) = if pat.overlaps() { union_coverage(pieces, m, s) } else { coverage(pieces, m, s) };
                 p += q;
                 g += dq;
                 ctx.work.lattice += 1;
@@ -687,14 +850,16 @@ pub(crate) fn eval(op: &ShapeOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
     let staggered = ins.get(4).is_some_and(|v| v.ch[0].mean > 0.5);
     let tiled_pat = match op {
         ShapeOp::Crosshatch => Some(Tiled::Cross { th: f(th), staggered }),
-        ShapeOp::TiledCircles => Some(Tiled::Shapes { size: f(th), staggered, hex: false }),
-        ShapeOp::TiledHexagons => Some(Tiled::Shapes { size: f(th), staggered, hex: true }),
+        ShapeOp::TiledCircles => Some(Tiled::Shapes { size: f(th), staggered, motif: Motif::Circle }),
+        ShapeOp::TiledHexagons => Some(Tiled::Shapes { size: f(th), staggered, motif: Motif::Hexagon }),
+        ShapeOp::TiledCloverleafs => Some(Tiled::Shapes { size: f(th), staggered, motif: Motif::Clover }),
         _ => None,
     };
     let m = if ctx.point {
         let v = match op {
             ShapeOp::Circle => circle_point(t, v2(&ins[1]), ins[2].ch[0].mean),
             ShapeOp::Hexagon => hexagon_point(t, v2(&ins[1]), ins[2].ch[0].mean),
+            ShapeOp::Cloverleaf => clover_point(t, v2(&ins[1]), ins[2].ch[0].mean),
             ShapeOp::Line => line_point(t, v2(&ins[1]), ins[2].ch[0].mean, v2(&ins[3]), v2(&ins[4])),
             ShapeOp::Grid => grid_point(cell(t, v2(&ins[1]), v2(&ins[2])), th, staggered),
             _ => tiled_pat.unwrap().point(cell(t, v2(&ins[1]), v2(&ins[2]))),
@@ -703,6 +868,24 @@ pub(crate) fn eval(op: &ShapeOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
     } else {
         match op {
             ShapeOp::Grid => grid(ins),
+            ShapeOp::Cloverleaf => {
+                let (c, r) = (v2(&ins[1]).as_dvec2(), f(ins[2].ch[0].mean));
+                let (m, s, j) = coord(&ins[0], DVec2::ONE, DVec2::ZERO);
+                let (p, dp) = if r != 0.0 {
+                    thread_local! {
+                        static PIECES: std::cell::RefCell<Vec<Piece>> = const { std::cell::RefCell::new(Vec::new()) };
+                    }
+                    PIECES.with_borrow_mut(|pieces| {
+                        pieces.clear();
+                        Piece::clover(c, r.abs() / 2.0, None, pieces);
+                        union_coverage(pieces, m, s)
+                    })
+                } else {
+                    (0.0, DVec2::ZERO)
+                };
+                ctx.work.lattice += 1;
+                indicator(p, dp, &j)
+            }
             ShapeOp::Circle | ShapeOp::Hexagon | ShapeOp::Line => {
                 let c = v2(&ins[1]).as_dvec2();
                 let r = f(ins[2].ch[0].mean);
@@ -752,13 +935,19 @@ mod tests {
                 let cap = Prim::Capsule { a: (p1 + c).as_dvec2(), b: (p2 + c).as_dvec2(), r: 0.2 };
                 let pl = coverage(&[Piece::one(cap)], m, s).0;
                 bad += ((pl - line_point(q, c, 0.2, p1, p2) as f64).abs() > 0.5) as i32;
+                let mut clover = Vec::new();
+                Piece::clover(c.as_dvec2(), 0.35, None, &mut clover);
+                let pc4 = union_coverage(&clover, m, s).0;
+                bad += ((pc4 - clover_point(q, c, 0.7) as f64).abs() > 0.5) as i32;
                 for pat in [
                     Tiled::Cross { th: 0.1, staggered: false },
                     Tiled::Cross { th: 0.1, staggered: true },
-                    Tiled::Shapes { size: 0.7, staggered: false, hex: false },
-                    Tiled::Shapes { size: 0.7, staggered: true, hex: false },
-                    Tiled::Shapes { size: 0.7, staggered: false, hex: true },
-                    Tiled::Shapes { size: 0.9, staggered: true, hex: true },
+                    Tiled::Shapes { size: 0.7, staggered: false, motif: Motif::Circle },
+                    Tiled::Shapes { size: 0.7, staggered: true, motif: Motif::Circle },
+                    Tiled::Shapes { size: 0.7, staggered: false, motif: Motif::Hexagon },
+                    Tiled::Shapes { size: 0.9, staggered: true, motif: Motif::Hexagon },
+                    Tiled::Shapes { size: 0.8, staggered: false, motif: Motif::Clover },
+                    Tiled::Shapes { size: 0.9, staggered: true, motif: Motif::Clover },
                 ] {
                     let h = pat.row_height();
                     let (i, j) = ((m.x).floor() as i64, (m.y / h).floor() as i64);
@@ -768,13 +957,17 @@ mod tests {
                         for ii in i - 1..=i + 1 {
                             pieces.clear();
                             pat.pieces(ii, jj, &mut pieces);
-                            p += coverage(&pieces, m, s).0;
+                            p += if pat.overlaps() {
+                                union_coverage(&pieces, m, s).0
+                            } else {
+                                coverage(&pieces, m, s).0
+                            };
                         }
                     }
                     bad += ((p - pat.point(q) as f64).abs() > 0.5) as i32;
                     n += 1;
                 }
-                n += 3;
+                n += 4;
             }
         }
         assert!(bad <= n / 500, "{bad} of {n} points disagree");

@@ -100,7 +100,7 @@ const DEMO: &str = r#"
 "#;
 
 fn cases() -> Vec<Case> {
-    vec![
+    let mut cases = vec![
         Case {
             name: "noise2d",
             body: r#"<texcoord name="t" type="vector2"/><multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="8, 8"/></multiply><noise2d name="n" type="float"><input name="texcoord" type="vector2" nodename="s"/></noise2d><output name="out" type="float" nodename="n"/>"#,
@@ -285,6 +285,142 @@ fn cases() -> Vec<Case> {
             coarse: 0.1,
         },
         Case { name: "demo (17 nodes)", body: DEMO, ratio: 0.5, coarse: 0.1 },
+    ];
+    cases.extend(composite_cases());
+    cases
+}
+
+/// Two colour noises in [0, 1] and a scalar one, the operands of the compositing cases.
+const OPERANDS: &str = r#"<texcoord name="t" type="vector2"/>
+  <multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="6, 6"/></multiply>
+  <add name="s2" type="vector2"><input name="in1" type="vector2" nodename="s"/><input name="in2" type="vector2" value="17.3, -4.1"/></add>
+  <noise2d name="fg" type="color4"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector4" value="0.5, 0.5, 0.5, 0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <noise2d name="bg" type="color4"><input name="texcoord" type="vector2" nodename="s2"/><input name="amplitude" type="vector4" value="0.5, 0.5, 0.5, 0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <noise2d name="k" type="float"><input name="texcoord" type="vector2" nodename="s2"/><input name="amplitude" type="float" value="0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>"#;
+
+/// The compositing family, the vector nodes, `trianglewave` and the cloverleaf shapes.
+fn composite_cases() -> Vec<Case> {
+    let blend = |name: &'static str, node: &str, mix: &str, ratio: f64| {
+        Case {
+        name,
+        body: Box::leak(
+            format!(
+                r#"{OPERANDS}<{node} name="r" type="color4"><input name="fg" type="color4" nodename="fg"/><input name="bg" type="color4" nodename="bg"/>{mix}</{node}><output name="out" type="color4" nodename="r"/>"#
+            )
+            .into_boxed_str(),
+        ),
+        ratio,
+        coarse: 0.1,
+    }
+    };
+    let varying_mix = r#"<input name="mix" type="float" nodename="k"/>"#;
+    let vec3 = |name: &'static str, body: &str, ratio: f64| {
+        Case {
+        name,
+        body: Box::leak(
+            format!(
+                r#"{OPERANDS}<convert name="a" type="vector3"><input name="in" type="color4" nodename="fg"/></convert><convert name="b" type="vector3"><input name="in" type="color4" nodename="bg"/></convert>{body}<output name="out" type="vector3" nodename="r"/>"#
+            )
+            .into_boxed_str(),
+        ),
+        ratio,
+        coarse: 0.1,
+    }
+    };
+    vec![
+        blend("plus", "plus", "", 0.2),
+        blend("minus (mix)", "minus", varying_mix, 0.2),
+        blend("difference", "difference", "", 0.3),
+        blend("screen (mix)", "screen", varying_mix, 0.2),
+        blend("overlay", "overlay", "", 0.3),
+        blend("burn", "burn", "", 0.5),
+        blend("dodge", "dodge", "", 0.5),
+        blend("over", "over", "", 0.2),
+        blend("in (mix)", "in", varying_mix, 0.2),
+        blend("mask", "mask", "", 0.2),
+        blend("matte", "matte", "", 0.2),
+        blend("out", "out", "", 0.2),
+        blend("disjointover", "disjointover", "", 0.3),
+        Case {
+            name: "inside/outside",
+            body: Box::leak(
+                format!(
+                    r#"{OPERANDS}<inside name="i" type="color4"><input name="in" type="color4" nodename="fg"/><input name="mask" type="float" nodename="k"/></inside><outside name="o" type="color4"><input name="in" type="color4" nodename="bg"/><input name="mask" type="float" nodename="k"/></outside><plus name="r" type="color4"><input name="fg" type="color4" nodename="i"/><input name="bg" type="color4" nodename="o"/></plus><output name="out" type="color4" nodename="r"/>"#
+                )
+                .into_boxed_str(),
+            ),
+            ratio: 0.3,
+            coarse: 0.1,
+        },
+        Case {
+            name: "premult/unpremult",
+            body: Box::leak(
+                format!(
+                    r#"{OPERANDS}<premult name="p" type="color4"><input name="in" type="color4" nodename="fg"/></premult><add name="q" type="color4"><input name="in1" type="color4" nodename="p"/><input name="in2" type="color4" value="0, 0, 0, 0.5"/></add><unpremult name="r" type="color4"><input name="in" type="color4" nodename="q"/></unpremult><output name="out" type="color4" nodename="r"/>"#
+                )
+                .into_boxed_str(),
+            ),
+            ratio: 0.3,
+            coarse: 0.1,
+        },
+        vec3("crossproduct", r#"<crossproduct name="r" type="vector3"><input name="in1" type="vector3" nodename="a"/><input name="in2" type="vector3" nodename="b"/></crossproduct>"#, 0.2),
+        vec3("reflect", r#"<normalize name="n" type="vector3"><input name="in" type="vector3" nodename="b"/></normalize><reflect name="r" type="vector3"><input name="in" type="vector3" nodename="a"/><input name="normal" type="vector3" nodename="n"/></reflect>"#, 0.3),
+        vec3("refract", r#"<subtract name="c" type="vector3"><input name="in1" type="vector3" nodename="a"/><input name="in2" type="float" value="0.5"/></subtract><normalize name="i" type="vector3"><input name="in" type="vector3" nodename="c"/></normalize><refract name="r" type="vector3"><input name="in" type="vector3" nodename="i"/><input name="ior" type="float" value="0.7"/></refract>"#, 0.3),
+        Case {
+            name: "colorcorrect",
+            body: Box::leak(
+                format!(
+                    r#"{OPERANDS}<convert name="c" type="color3"><input name="in" type="color4" nodename="fg"/></convert><colorcorrect name="r" type="color3"><input name="in" type="color3" nodename="c"/><input name="hue" type="float" value="0.1"/><input name="saturation" type="float" value="1.3"/><input name="gamma" type="float" value="1.5"/><input name="lift" type="float" value="0.05"/><input name="gain" type="float" value="0.9"/><input name="contrast" type="float" value="1.2"/><input name="exposure" type="float" nodename="k"/></colorcorrect><output name="out" type="color3" nodename="r"/>"#
+                )
+                .into_boxed_str(),
+            ),
+            ratio: 0.3,
+            coarse: 0.1,
+        },
+        Case {
+            name: "ramp_gradient",
+            body: Box::leak(
+                format!(
+                    r#"{OPERANDS}<ramp_gradient name="r" type="color4"><input name="x" type="float" nodename="k"/><input name="interval1" type="float" value="0.35"/><input name="interval2" type="float" value="0.65"/><input name="color1" type="color4" value="0.1, 0.2, 0.3, 1"/><input name="color2" type="color4" value="0.9, 0.5, 0.1, 0.5"/></ramp_gradient><output name="out" type="color4" nodename="r"/>"#
+                )
+                .into_boxed_str(),
+            ),
+            ratio: 0.3,
+            coarse: 0.1,
+        },
+        Case {
+            name: "bump",
+            body: Box::leak(
+                format!(r#"{OPERANDS}<bump name="r" type="vector3"><input name="height" type="float" nodename="k"/><input name="scale" type="float" value="4"/></bump><output name="out" type="vector3" nodename="r"/>"#)
+                    .into_boxed_str(),
+            ),
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "trianglewave",
+            body: r#"<texcoord name="t" type="vector2"/><separate2 name="uv" type="multioutput"><input name="in" type="vector2" nodename="t"/></separate2><multiply name="x" type="float"><input name="in1" type="float" nodename="uv" output="outx"/><input name="in2" type="float" value="5"/></multiply><trianglewave name="r" type="float"><input name="in" type="float" nodename="x"/></trianglewave><output name="out" type="float" nodename="r"/>"#,
+            ratio: 0.2,
+            coarse: 0.1,
+        },
+        Case {
+            name: "cloverleaf",
+            body: r#"<cloverleaf name="n" type="float"><input name="center" type="vector2" value="-0.2, 0.3"/><input name="radius" type="float" value="0.9"/></cloverleaf><output name="out" type="float" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "tiledcloverleafs",
+            body: r#"<tiledcloverleafs name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 3"/><input name="size" type="float" value="0.8"/></tiledcloverleafs><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
+        Case {
+            name: "tiledcloverleafs stag",
+            body: r#"<tiledcloverleafs name="n" type="color3"><input name="uvtiling" type="vector2" value="2, 3"/><input name="size" type="float" value="0.9"/><input name="staggered" type="boolean" value="true"/></tiledcloverleafs><output name="out" type="color3" nodename="n"/>"#,
+            ratio: 0.5,
+            coarse: 0.1,
+        },
     ]
 }
 
@@ -308,9 +444,15 @@ fn filtered_matches_supersampling() {
             // nodes integrate against) is the true one within documented bounds: 30 % low to
             // 45 % high for single nodes, 70 % high for the demo composite (products and
             // conditionals of correlated inputs are taken as independent). heighttonormal
-            // reports no spread for its normal.
+            // (and bump, made of it) reports no spread for its normal; burn and dodge divide by (1 minus) fg, whose
+            // values near the pole give their spread heavy tails that cubature's few points
+            // miss (their means are held to the error ratio like every node's).
             let (lo, hi) = if case.name.starts_with("demo") { (0.7, 1.7) } else { (0.7, 1.45) };
-            if sigma >= 1e-3 && spread > 0.01 && case.name != "heighttonormal" && !(lo..=hi).contains(&(sd / spread)) {
+            if sigma >= 1e-3
+                && spread > 0.01
+                && !["heighttonormal", "bump", "burn", "dodge"].contains(&case.name)
+                && !(lo..=hi).contains(&(sd / spread))
+            {
                 failures.push(format!("{} σ={sigma}: node σ {sd:.3e} vs spread {spread:.3e}", case.name));
             }
             // Coarse footprints, where point sampling aliases: a small fraction of its error.

@@ -305,7 +305,7 @@ fn file_prefixes_and_colour_spaces() {
     <output name="grey" type="float" nodename="grey" />
     <output name="k" type="color3" nodename="k" />
   </nodegraph>"#;
-    let opts = LoadOptions { search_paths: vec![images.clone()], lenient: false };
+    let opts = LoadOptions { search_paths: vec![images.clone()], ..LoadOptions::default() };
     let p = write(&d, "colour.mtlx", &doc("1.39", body));
     let lin = Document::load_with(&p, &opts).unwrap();
     let srgb = |x: f32| if x <= 0.04045 { x / 12.92 } else { ((x + 0.055) / 1.055).powf(2.4) };
@@ -763,5 +763,209 @@ fn empty_image_files_and_vector_amplitudes_follow_materialx() {
             assert!((fv[k] - a * f1[k]).abs() < 1e-6, "channel {k}: {} vs {} × {}", fv[k], a, f1[k]);
         }
         assert_eq!(eval(&d, "g/n3", uv).len(), 3);
+    }
+}
+
+/// `frame` and `time` read the frame of the load options (1 by default), `time` as
+/// `frame / fps` also where `fps` is connected; `geomcolor` is 0 with a warning naming it; a
+/// `frame` of another type is an error at its line.
+#[test]
+fn frame_time_and_vertex_colours() {
+    let text = doc(
+        "1.39",
+        r#"<nodegraph name="g">
+  <frame name="f" type="float"/>
+  <output name="frame" type="float" nodename="f"/>
+  <time name="t0" type="float"/>
+  <output name="time24" type="float" nodename="t0"/>
+  <time name="t1" type="float"><input name="fps" type="float" value="30"/></time>
+  <output name="time30" type="float" nodename="t1"/>
+  <texcoord name="uv" type="vector2"/>
+  <separate2 name="s" type="multioutput"><input name="in" type="vector2" nodename="uv"/></separate2>
+  <add name="rate" type="float"><input name="in1" type="float" nodename="s" output="outx"/><input name="in2" type="float" value="1"/></add>
+  <time name="t2" type="float"><input name="fps" type="float" nodename="rate"/></time>
+  <output name="timev" type="float" nodename="t2"/>
+  <geomcolor name="c" type="color3"/>
+  <output name="col" type="color3" nodename="c"/>
+</nodegraph>"#,
+    );
+    let uv = Vec2::new(0.25, 0.5);
+    let d = Document::parse(&text, Path::new("frame.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(eval(&d, "g/frame", uv), vec![1.0]);
+    assert_eq!(eval(&d, "g/time24", uv), vec![1.0 / 24.0]);
+    assert_eq!(eval(&d, "g/time30", uv), vec![1.0 / 30.0]);
+    assert!(close(&eval(&d, "g/timev", uv), &[1.0 / 1.25], 1e-6));
+    assert_eq!(eval(&d, "g/col", uv), vec![0.0, 0.0, 0.0]);
+    let w = d.graph().warnings();
+    assert!(w.iter().any(|w| w.contains("`g/c`") && w.contains("vertex colour")), "{w:?}");
+    let opts = LoadOptions { frame: Some(48.0), ..LoadOptions::default() };
+    let d = Document::parse(&text, Path::new("frame.mtlx"), &opts).unwrap();
+    assert_eq!(eval(&d, "g/frame", uv), vec![48.0]);
+    assert_eq!(eval(&d, "g/time24", uv), vec![2.0]);
+    assert!(close(&eval(&d, "g/timev", uv), &[48.0 / 1.25], 1e-5));
+
+    let dir = dir("frame");
+    let bad = write(
+        &dir,
+        "bad.mtlx",
+        &doc(
+            "1.39",
+            r#"<nodegraph name="g">
+  <frame name="f" type="color3"/>
+  <output name="o" type="color3" nodename="f"/>
+</nodegraph>"#,
+        ),
+    );
+    let e = expect_error(&bad, line_of(&bad, "<frame"));
+    assert!(e.to_string().contains("is a float"), "{e}");
+}
+
+/// `colorcorrect`, `ramp_gradient`, `bump` and `blur` equal the MaterialX graphs that define
+/// them, written out here from their nodes, at points and over footprints.
+#[test]
+fn composed_nodes_equal_their_definitions() {
+    let text = doc(
+        "1.39",
+        r#"<nodegraph name="g">
+  <texcoord name="t" type="vector2"/>
+  <multiply name="s" type="vector2"><input name="in1" type="vector2" nodename="t"/><input name="in2" type="vector2" value="4, 4"/></multiply>
+  <noise2d name="c" type="color3"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="vector3" value="0.5, 0.5, 0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <noise2d name="k" type="float"><input name="texcoord" type="vector2" nodename="s"/><input name="amplitude" type="float" value="0.5"/><input name="pivot" type="float" value="0.5"/></noise2d>
+  <colorcorrect name="cc" type="color3">
+    <input name="in" type="color3" nodename="c"/><input name="hue" type="float" value="0.1"/><input name="saturation" type="float" value="1.3"/>
+    <input name="gamma" type="float" value="1.5"/><input name="lift" type="float" value="0.05"/><input name="gain" type="float" value="0.9"/>
+    <input name="contrast" type="float" value="1.2"/><input name="contrastpivot" type="float" value="0.4"/><input name="exposure" type="float" value="0.5"/>
+  </colorcorrect>
+  <output name="cc" type="color3" nodename="cc"/>
+  <hsvadjust name="h" type="color3"><input name="in" type="color3" nodename="c"/><input name="amount" type="vector3" value="0.1, 1, 1"/></hsvadjust>
+  <saturate name="sa" type="color3"><input name="in" type="color3" nodename="h"/><input name="amount" type="float" value="1.3"/></saturate>
+  <range name="ga" type="color3"><input name="in" type="color3" nodename="sa"/><input name="gamma" type="float" value="1.5"/></range>
+  <multiply name="l1" type="color3"><input name="in1" type="color3" nodename="ga"/><input name="in2" type="float" value="0.95"/></multiply>
+  <add name="l2" type="color3"><input name="in1" type="color3" nodename="l1"/><input name="in2" type="float" value="0.05"/></add>
+  <multiply name="gn" type="color3"><input name="in1" type="color3" nodename="l2"/><input name="in2" type="float" value="0.9"/></multiply>
+  <contrast name="co" type="color3"><input name="in" type="color3" nodename="gn"/><input name="amount" type="float" value="1.2"/><input name="pivot" type="float" value="0.4"/></contrast>
+  <multiply name="ex" type="color3"><input name="in1" type="color3" nodename="co"/><input name="in2" type="float" value="1.41421356"/></multiply>
+  <output name="cc_graph" type="color3" nodename="ex"/>
+  <ramp_gradient name="rg" type="color4">
+    <input name="x" type="float" nodename="k"/><input name="interval1" type="float" value="0.3"/><input name="interval2" type="float" value="0.7"/>
+    <input name="color1" type="color4" value="0.1, 0.2, 0.3, 1"/><input name="color2" type="color4" value="0.9, 0.5, 0.1, 0.5"/>
+    <input name="prev_color" type="color4" value="0, 0, 1, 1"/><input name="interpolation" type="integer" value="0"/>
+  </ramp_gradient>
+  <output name="rg" type="color4" nodename="rg"/>
+  <clamp name="rc" type="float"><input name="in" type="float" nodename="k"/><input name="low" type="float" value="0.3"/><input name="high" type="float" value="0.7"/></clamp>
+  <remap name="rr" type="float"><input name="in" type="float" nodename="rc"/><input name="inlow" type="float" value="0.3"/><input name="inhigh" type="float" value="0.7"/></remap>
+  <mix name="rm" type="color4"><input name="fg" type="color4" value="0.9, 0.5, 0.1, 0.5"/><input name="bg" type="color4" value="0.1, 0.2, 0.3, 1"/><input name="mix" type="float" nodename="rr"/></mix>
+  <ifgreater name="ri" type="color4"><input name="value1" type="float" nodename="k"/><input name="value2" type="float" value="0.3"/><input name="in1" type="color4" nodename="rm"/><input name="in2" type="color4" value="0, 0, 1, 1"/></ifgreater>
+  <output name="rg_graph" type="color4" nodename="ri"/>
+  <bump name="b" type="vector3"><input name="height" type="float" nodename="k"/><input name="scale" type="float" value="0.7"/></bump>
+  <output name="bump" type="vector3" nodename="b"/>
+  <heighttonormal name="hn" type="vector3"><input name="in" type="float" nodename="k"/></heighttonormal>
+  <normalmap name="nm" type="vector3"><input name="in" type="vector3" nodename="hn"/><input name="scale" type="float" value="0.7"/></normalmap>
+  <output name="bump_graph" type="vector3" nodename="nm"/>
+  <blur name="bl" type="color3"><input name="in" type="color3" nodename="c"/><input name="size" type="float" value="0.2"/></blur>
+  <output name="blur" type="color3" nodename="bl"/>
+  <output name="c" type="color3" nodename="c"/>
+</nodegraph>"#,
+    );
+    let d =
+        Document::parse(&text, Path::new("composed.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let w = d.graph().warnings();
+    assert!(w.iter().any(|w| w.contains("`g/bl`") && w.contains("unblurred")), "{w:?}");
+    let g = d.graph();
+    let mut scratch = EvalScratch::new(g);
+    let mut at = |name: &str, fp: &Footprint| {
+        let v = g.eval_output(g.output_id(name).unwrap(), fp, &mut scratch);
+        v.ch[..v.n()].iter().map(|m| m.mean).collect::<Vec<f32>>()
+    };
+    for uv in [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.9, 0.44), Vec2::new(0.31, 0.27)] {
+        for fp in [Footprint::point(uv), Footprint::isotropic(uv, 0.004), Footprint::isotropic(uv, 0.05)] {
+            for (node, graph, tol) in [
+                ("g/cc", "g/cc_graph", 2e-5),
+                ("g/rg", "g/rg_graph", 2e-6),
+                ("g/bump", "g/bump_graph", 1e-6),
+                ("g/blur", "g/c", 0.0),
+            ] {
+                let (a, b) = (at(node, &fp), at(graph, &fp));
+                assert!(close(&a, &b, tol), "{node} at {uv} σ² {:?}: {a:?} vs {b:?}", fp.cov);
+            }
+        }
+    }
+}
+
+/// `latlongimage` equals MaterialX's graph for it written out node by node (at points and over
+/// footprints), also across its seam; `triplanarprojection` on the flat quad reads the z
+/// lookup only, and with a diagonal normal the mean of its three lookups; empty files give the
+/// default.
+#[test]
+fn latlong_and_triplanar_images() {
+    let img = common::shared().join("mtlx-suite/images/resources/Images/grid.png");
+    let f = img.display();
+    let text = doc(
+        "1.39",
+        &format!(
+            r#"<nodegraph name="g">
+  <texcoord name="t" type="vector2"/>
+  <separate2 name="s" type="multioutput"><input name="in" type="vector2" nodename="t"/></separate2>
+  <combine3 name="d0" type="vector3"><input name="in1" type="float" nodename="s" output="outx"/><input name="in2" type="float" nodename="s" output="outy"/><input name="in3" type="float" value="-0.3"/></combine3>
+  <subtract name="d1" type="vector3"><input name="in1" type="vector3" nodename="d0"/><input name="in2" type="vector3" value="0.5, 0.5, 0"/></subtract>
+  <normalize name="d" type="vector3"><input name="in" type="vector3" nodename="d1"/></normalize>
+  <latlongimage name="ll" type="color3"><input name="file" type="filename" value="{f}"/><input name="viewdir" type="vector3" nodename="d"/><input name="rotation" type="float" value="30"/></latlongimage>
+  <output name="ll" type="color3" nodename="ll"/>
+  <separate3 name="dc" type="multioutput"><input name="in" type="vector3" nodename="d"/></separate3>
+  <atan2 name="a" type="float"><input name="iny" type="float" nodename="dc" output="outx"/><input name="inx" type="float" nodename="dc" output="outz"/></atan2>
+  <multiply name="a1" type="float"><input name="in1" type="float" nodename="a"/><input name="in2" type="float" value="-0.15915494"/></multiply>
+  <add name="a2" type="float"><input name="in1" type="float" nodename="a1"/><input name="in2" type="float" value="0.5"/></add>
+  <add name="a3" type="float"><input name="in1" type="float" nodename="a2"/><input name="in2" type="float" value="0.0833333"/></add>
+  <asin name="b" type="float"><input name="in" type="float" nodename="dc" output="outy"/></asin>
+  <multiply name="b1" type="float"><input name="in1" type="float" nodename="b"/><input name="in2" type="float" value="0.31830989"/></multiply>
+  <add name="b2" type="float"><input name="in1" type="float" nodename="b1"/><input name="in2" type="float" value="0.5"/></add>
+  <combine2 name="uv" type="vector2"><input name="in1" type="float" nodename="a3"/><input name="in2" type="float" nodename="b2"/></combine2>
+  <image name="env" type="color3"><input name="file" type="filename" value="{f}"/><input name="texcoord" type="vector2" nodename="uv"/><input name="uaddressmode" type="string" value="periodic"/><input name="vaddressmode" type="string" value="mirror"/></image>
+  <output name="ll_graph" type="color3" nodename="env"/>
+  <triplanarprojection name="tp" type="color3"><input name="filex" type="filename" value=""/><input name="filey" type="filename" value="{f}"/><input name="filez" type="filename" value="{f}"/><input name="default" type="color3" value="0.1, 0.2, 0.3"/></triplanarprojection>
+  <output name="tp" type="color3" nodename="tp"/>
+  <position name="p" type="vector3"/>
+  <separate3 name="pc" type="multioutput"><input name="in" type="vector3" nodename="p"/></separate3>
+  <combine2 name="xy" type="vector2"><input name="in1" type="float" nodename="pc" output="outx"/><input name="in2" type="float" nodename="pc" output="outy"/></combine2>
+  <image name="iz" type="color3"><input name="file" type="filename" value="{f}"/><input name="texcoord" type="vector2" nodename="xy"/></image>
+  <output name="tp_graph" type="color3" nodename="iz"/>
+  <triplanarprojection name="tq" type="color3"><input name="filex" type="filename" value=""/><input name="filey" type="filename" value="{f}"/><input name="filez" type="filename" value="{f}"/><input name="default" type="color3" value="0.1, 0.2, 0.3"/><input name="normal" type="vector3" value="1, -1, 1"/></triplanarprojection>
+  <output name="tq" type="color3" nodename="tq"/>
+  <combine2 name="xz" type="vector2"><input name="in1" type="float" nodename="pc" output="outx"/><input name="in2" type="float" nodename="pc" output="outz"/></combine2>
+  <image name="iy" type="color3"><input name="file" type="filename" value="{f}"/><input name="texcoord" type="vector2" nodename="xz"/></image>
+  <add name="sum" type="color3"><input name="in1" type="color3" nodename="iy"/><input name="in2" type="color3" nodename="iz"/></add>
+  <add name="sum2" type="color3"><input name="in1" type="color3" nodename="sum"/><input name="in2" type="color3" value="0.1, 0.2, 0.3"/></add>
+  <multiply name="mean" type="color3"><input name="in1" type="color3" nodename="sum2"/><input name="in2" type="float" value="0.33333333"/></multiply>
+  <output name="tq_graph" type="color3" nodename="mean"/>
+  <latlongimage name="le" type="color3"><input name="file" type="filename" value=""/><input name="default" type="color3" value="0.5, 0.6, 0.7"/></latlongimage>
+  <output name="le" type="color3" nodename="le"/>
+</nodegraph>"#
+        ),
+    );
+    let d = Document::parse(&text, Path::new("images.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let g = d.graph();
+    let mut scratch = EvalScratch::new(g);
+    let mut at = |name: &str, fp: &Footprint| {
+        let v = g.eval_output(g.output_id(name).unwrap(), fp, &mut scratch);
+        v.ch[..v.n()].iter().map(|m| m.mean).collect::<Vec<f32>>()
+    };
+    // The seam (d.x = 0 behind the viewer) runs along u = 0.5 for v < 0.5.
+    for uv in
+        [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.5, 0.2), Vec2::new(0.31, 0.27), Vec2::new(0.77, 0.9)]
+    {
+        let p = Footprint::point(uv);
+        assert!(close(&at("g/ll", &p), &at("g/ll_graph", &p), 1e-4), "latlong at {uv}");
+        assert!(close(&at("g/tp", &p), &at("g/tp_graph", &p), 1e-5), "triplanar at {uv}");
+        assert!(close(&at("g/tq", &p), &at("g/tq_graph", &p), 1e-5), "triplanar blend at {uv}");
+        assert_eq!(at("g/le", &p), vec![0.5, 0.6, 0.7]);
+        for s in [0.002f32, 0.02] {
+            let fp = Footprint::isotropic(uv, s);
+            // Away from the seam, where the written-out graph's cubature sees no wrap.
+            if (uv.x - 0.5).abs() > 0.1 {
+                assert!(close(&at("g/ll", &fp), &at("g/ll_graph", &fp), 0.02), "latlong at {uv} σ {s}");
+            }
+            assert!(close(&at("g/tp", &fp), &at("g/tp_graph", &fp), 1e-5), "triplanar at {uv} σ {s}");
+            assert!(at("g/ll", &fp).iter().all(|x| x.is_finite()));
+        }
     }
 }

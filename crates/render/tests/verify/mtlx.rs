@@ -322,3 +322,35 @@ fn library_materials_render_and_only_uv_nodes_are_cached() {
     let e = render::film::relative_mse(&cached, &plain);
     assert!(e < 0.05, "cached against direct: relMSE {e}");
 }
+
+/// The define `frame` reaches MaterialX's `frame` and `time` nodes: a surface whose reflectance
+/// is `time` renders brighter at frame 12 than at frame 6, in proportion, and at the default
+/// frame (1) as at `-D frame=1`.
+#[test]
+fn frame_define_drives_time_nodes() {
+    let dir = std::env::temp_dir().join(format!("render-frame-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("time.mtlx"),
+        r#"<?xml version="1.0"?><materialx version="1.39"><nodegraph name="g">
+  <time name="t" type="float"><input name="fps" type="float" value="24"/></time>
+  <convert name="c" type="color3"><input name="in" type="float" nodename="t"/></convert>
+  <output name="out" type="color3" nodename="c"/></nodegraph></materialx>"#,
+    )
+    .unwrap();
+    let scene = grazing_scene(
+        r#"<texture type="mtlx" name="reflectance"><string name="filename" value="time.mtlx"/><string name="output" value="g/out"/></texture>"#,
+    );
+    let mean = |defines: &[(String, String)]| {
+        let s =
+            render::loader::load_str(&scene, Path::new("frame.xml"), &dir, defines).unwrap_or_else(|e| panic!("{e}"));
+        let img = render(&s, RenderSettings::new(1, 3), &|_| {}).image;
+        img.pixels.iter().map(|p| p.x as f64).sum::<f64>() / img.pixels.len() as f64
+    };
+    let d = |f: &str| vec![("frame".to_string(), f.to_string())];
+    let (m1, m6, m12) = (mean(&[]), mean(&d("6")), mean(&d("12")));
+    assert!(m1 > 0.0);
+    assert_eq!(m1, mean(&d("1")));
+    assert!((m12 / m6 - 2.0).abs() < 1e-6, "{m6} {m12}");
+    assert!((m6 / m1 - 6.0).abs() < 1e-6, "{m1} {m6}");
+}

@@ -15,10 +15,14 @@ pub const EXCLUDED: &[(&str, &str)] = &[
     ("image", "needs a file"),
     ("tiledimage", "needs a file"),
     ("hextiledimage", "needs a file"),
+    ("latlongimage", "needs a file"),
+    ("triplanarprojection", "needs a file"),
     ("creatematrix", "matrices are folded at load, not evaluated"),
     ("determinant", "matrices are folded at load, not evaluated"),
     ("invertmatrix", "matrices are folded at load, not evaluated"),
     ("transpose", "matrices are folded at load, not evaluated"),
+    ("frame", "folded to a constant by the MaterialX reader"),
+    ("time", "folded to a constant by the MaterialX reader"),
 ];
 
 /// Categories whose unfiltered function is continuous in every input (for any constants): their
@@ -67,6 +71,24 @@ pub const CONTINUOUS: &[&str] = &[
     "ramptb",
     "ramp4",
     "dot",
+    "plus",
+    "minus",
+    "difference",
+    "screen",
+    "overlay",
+    "over",
+    "in",
+    "mask",
+    "matte",
+    "out",
+    "inside",
+    "outside",
+    "premult",
+    "crossproduct",
+    "reflect",
+    "trianglewave",
+    "geomcolor",
+    "blur",
 ];
 
 /// Every category the generator draws from.
