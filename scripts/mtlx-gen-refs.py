@@ -93,8 +93,10 @@ RANGES = {
     "worleynoise3d": {"position": (-1.0, 4.0), "jitter": (0.5, 1.0)},
     "unifiednoise2d": {"texcoord": (-0.5, 2.0), "freq": (1.0, 3.0), "offset": (-0.5, 0.5), "jitter": (0.5, 1.0), "outmin": (0.0, 0.2), "outmax": (0.8, 1.0), "lacunarity": (1.8, 2.4), "diminish": (0.3, 0.7)},
     "unifiednoise3d": {"position": (-0.5, 2.0), "freq": (1.0, 3.0), "offset": (-0.5, 0.5), "jitter": (0.5, 1.0), "outmin": (0.0, 0.2), "outmax": (0.8, 1.0), "lacunarity": (1.8, 2.4), "diminish": (0.3, 0.7)},
-    "randomfloat": {"in": (0.0, 20.0), "min": (-0.5, 0.0), "max": (1.0, 1.5), "seed": (0.0, 5.0)},
-    "randomcolor": {"in": (0.0, 20.0), "huelow": (0.0, 0.2), "huehigh": (0.7, 1.0), "saturationlow": (0.0, 0.3), "saturationhigh": (0.6, 1.0), "brightnesslow": (0.0, 0.3), "brightnesshigh": (0.6, 1.0), "seed": (0.0, 5.0)},
+    # randomfloat scales a float `in` by 4096 before taking its cell: a range whose texel
+    # centres stay 0.37 or more from a cell edge there (the GPU's interpolated uv is 1e-7 off).
+    "randomfloat": {"in": (0.0137, 19.71), "min": (-0.5, 0.0), "max": (1.0, 1.5), "seed": (0.0, 5.0)},
+    "randomcolor": {"in": (0.0137, 19.71), "huelow": (0.0, 0.2), "huehigh": (0.7, 1.0), "saturationlow": (0.0, 0.3), "saturationhigh": (0.6, 1.0), "brightnesslow": (0.0, 0.3), "brightnesshigh": (0.6, 1.0), "seed": (0.0, 5.0)},
     "checkerboard": {"texcoord": (0.0, 1.0), "uvtiling": (3.0, 9.0), "uvoffset": (-0.2, 0.2)},
     "circle": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.15, 0.45)},
     "cloverleaf": {"texcoord": (0.0, 1.0), "center": (0.3, 0.7), "radius": (0.15, 0.45)},
