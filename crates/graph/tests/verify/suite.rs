@@ -116,8 +116,9 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
     (
         "docs/switch.mtlx",
         "",
-        "tessera bug: where `which` ≥ 10 MaterialX's NG_switch gives 0 (no input selected), tessera gives in10 (the \
-         last column, which = 10.4)",
+        "tessera differs: where `which` ≥ 10 MaterialX 1.39.5's NG_switch gives 0 (no input selected); tessera \
+         gives in10 for every `which` ≥ 9 (the last column, which = 10.4), the rule its upgrade of five-input 1.38 \
+         switches relies on",
     ),
 ];
 
