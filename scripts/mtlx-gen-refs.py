@@ -13,6 +13,10 @@ noise, a magnified patch of an image); integers are the floor of such a ramp and
 threshold of one, where they are operands; settings (uniform inputs, strings, octaves, ...) keep
 their defaults or the constants of CONSTANTS.
 
+The first nodedef of each category is also written once for every other value of each of its
+enumerated settings (`space`, address modes, `filtertype`, noise `type` and `style`, `ramp`'s
+kind and interpolation, ...), as graphs named <nodedef>_<input>_<value>.
+
 Not generated (listed in the bake manifest's `skipped`): nodedefs whose outputs are shaders,
 materials, matrices, strings or filenames, which a texture bake cannot show.
 
@@ -20,6 +24,7 @@ usage: python3 scripts/mtlx-gen-refs.py
 """
 import json
 import os
+import re
 import shutil
 
 ROOT = os.path.normpath(os.path.join(os.path.dirname(__file__), ".."))
@@ -153,6 +158,20 @@ CONSTANTS = {
     "unifiednoise3d": {"jitter": "1.0"},
 }
 
+# Enumerated settings with no variants: frameendaction acts only on image sequences.
+NO_VARIANTS = {"frameendaction"}
+# Ranges for variants of a setting (a tuple per channel): an address mode's variants straddle
+# the image's edge at 0 in their own axis (with `default` held, texcoord is the first driven
+# input: channel 0 follows u, channel 1 v).
+VARIANT_RANGES = {
+    "uaddressmode": {"texcoord": ((-0.02, 0.02), (0.30, 0.34))},
+    "vaddressmode": {"texcoord": ((0.30, 0.34), (-0.02, 0.02))},
+}
+# Inputs held at 0.25 in variants of a setting: MaterialX's GLSL renders the `constant` address
+# mode with the sampler's border colour, set from `default`'s value, so a connected `default`
+# reads as 0 beyond the edge (tessera returns the connected value, as the specification says).
+VARIANT_HELD = {"uaddressmode": ("default",), "vaddressmode": ("default",)}
+
 # Integer and boolean inputs that are operands (driven), not settings.
 OPERANDS = {"in", "in1", "in2", "value1", "value2", "which", "fg", "bg", "value"}
 # Float inputs driven by the floor of their ramp, per category.
@@ -204,12 +223,15 @@ class Graph:
     def coord(self, k):
         return ("uv_split", "outx" if k % 2 == 0 else "outy")
 
-    def ramp(self, prefix, ty, lo, hi, k):
-        """A value of type ty over [lo, hi] per channel, channel c following u or v by (k + c)."""
+    def ramp(self, prefix, ty, lo, hi, k, per_channel=None):
+        """A value of type ty over [lo, hi] per channel, channel c following u or v by (k + c)
+        (per_channel: explicit (lo, hi) of each channel instead)."""
         n = CHANNELS[ty]
         span = hi - lo
         los = [lo + 0.1 * span * c for c in range(n)]
         his = [hi - 0.05 * span * c for c in range(n)]
+        if per_channel:
+            los, his = [a for a, _ in per_channel], [b for _, b in per_channel]
         if n == 1:
             src, out = self.coord(k)
             inp = ("in", "float", "node", src, out)
@@ -260,8 +282,33 @@ def constant(nd, inp):
     return typed_default(inp["type"])
 
 
-def graph_for(nd):
-    g = Graph(nd["name"][3:] if nd["name"].startswith("ND_") else nd["name"])
+def enum_variants(nd):
+    """(name suffix, {input: value}) for every other value of each enumerated setting of nd."""
+    out = []
+    for inp in nd["inputs"]:
+        names = [e.strip() for e in inp.get("enum", [])]
+        # Enumerated integers and strings (a colour's enum, as luminance's lumacoeffs, names presets).
+        if inp["type"] not in ("integer", "string"):
+            continue
+        if not names or inp["name"] in CONSTANTS.get(nd["node"], {}) or inp["name"] in NO_VARIANTS:
+            continue
+        values = [v.strip() for v in inp["enumvalues"].split(",")] if inp.get("enumvalues") else names
+        default = constant(nd, inp)
+        for name, value in zip(names, values):
+            if value != default:
+                ranges = VARIANT_RANGES.get(inp["name"], {})
+                settings = {inp["name"]: value}
+                for held in VARIANT_HELD.get(inp["name"], ()):
+                    i = next(i for i in nd["inputs"] if i["name"] == held)
+                    settings[held] = ", ".join(["0.25"] * CHANNELS.get(i["type"], 1))
+                out.append(("%s_%s" % (inp["name"], re.sub(r"\W", "", name).lower()), settings, ranges))
+    return out
+
+
+def graph_for(nd, suffix="", settings=None, ranges=None):
+    settings = settings or {}
+    ranges = ranges or {}
+    g = Graph((nd["name"][3:] if nd["name"].startswith("ND_") else nd["name"]) + suffix)
     ins = []
     k = 0
     for inp in nd["inputs"]:
@@ -270,10 +317,18 @@ def graph_for(nd):
         driven = not fixed and not inp.get("uniform") and (
             ty in CHANNELS or (ty in ("integer", "boolean") and inp["name"] in OPERANDS)
         )
+        if inp["name"] in settings:
+            ins.append((inp["name"], ty, "value", settings[inp["name"]], None))
+            continue
         if not driven:
             ins.append((inp["name"], ty, "value", constant(nd, inp), None))
             continue
-        lo, hi = input_range(nd, inp, k)
+        per_channel = None
+        r = ranges.get(inp["name"])
+        if r and isinstance(r[0], tuple):
+            per_channel, (lo, hi) = r, r[0]
+        else:
+            lo, hi = r or input_range(nd, inp, k)
         prefix = "drive_" + inp["name"]
         if ty == "integer":
             if nd["node"] not in RANGES or inp["name"] not in RANGES[nd["node"]]:
@@ -294,7 +349,7 @@ def graph_for(nd):
             )
             src = prefix + "_bool"
         else:
-            src = g.ramp(prefix, ty, lo, hi, k)
+            src = g.ramp(prefix, ty, lo, hi, k, per_channel)
             if inp["name"] in QUANTIZED.get(nd["node"], ()):
                 g.node("floor", prefix + "_whole", ty, [("in", ty, "node", src, None)])
                 src = prefix + "_whole"
@@ -329,11 +384,15 @@ def main():
     index = []
     for cat, nds in by_cat.items():
         parts = ['<?xml version="1.0"?>', "<!-- Generated by scripts/mtlx-gen-refs.py from MaterialX 1.39.5's nodedefs: one graph per nodedef of `%s`. -->" % cat, '<materialx version="1.39">']
-        for nd in nds:
-            g, elements = graph_for(nd)
-            parts.append(g.text())
-            for e in elements:
-                index.append({"document": "docs/%s.mtlx" % cat, "element": e, "nodedef": nd["name"], "node": cat})
+        for i, nd in enumerate(nds):
+            # Every type variant at the default settings; the first also at every other value of
+            # each enumerated setting (spaces, address modes, noise types, ramp kinds, ...).
+            variants = [("", {}, {})] + (enum_variants(nd) if i == 0 else [])
+            for suffix, settings, ranges in variants:
+                g, elements = graph_for(nd, "_" + suffix if suffix else "", settings, ranges)
+                parts.append(g.text())
+                for e in elements:
+                    index.append({"document": "docs/%s.mtlx" % cat, "element": e, "nodedef": nd["name"], "node": cat})
         parts.append("</materialx>\n")
         with open(os.path.join(OUT, cat + ".mtlx"), "w") as f:
             f.write("\n".join(parts))

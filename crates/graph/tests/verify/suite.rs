@@ -46,7 +46,7 @@ const IMAGE_OUTLIERS: f32 = 0.001;
 /// Bakes that pass today: a regression floor on top of the per-bake check against the table.
 const MIN_PASS: usize = 248;
 /// The same floor for tessera's own references (`tests/mtlx-refs`).
-const MIN_OWN_PASS: usize = 583;
+const MIN_OWN_PASS: usize = 623;
 
 /// Explanations of known differences, appended to failures: (document suffix, element prefix,
 /// note).
@@ -112,6 +112,13 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
         "geomcolor_color4",
         "geometry: the baker binds no colour stream, and GL's default vertex attribute is (0, 0, 0, 1), so its alpha \
          is 1; tessera's surfaces carry no vertex colour and geomcolor gives 0 in every channel",
+    ),
+    (
+        "docs/image.mtlx",
+        "image_float_vaddressmode_mirror",
+        "MaterialX's mirror seam in v lies half an image texel (1/1280) below v = 0: below it each of its rows equals \
+         tessera's one bake row higher, which mirrors at v = 0 exactly (the u mirror agrees; the error is within \
+         tolerance at every texel, the mean is not)",
     ),
     (
         "docs/switch.mtlx",
