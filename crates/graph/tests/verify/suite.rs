@@ -83,8 +83,9 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
         "docs/fractal2d.mtlx",
         "",
         "the failing channels are those MaterialX computes at an offset lattice (the second of vector2, the fourth of \
-         vector4/color4: p + (19, 193)); there the octaves reach coordinates of about 10³, where a float's last bit \
-         is 6e-5 and llvmpipe's rounding differs from ours at a few texels",
+         vector4/color4: p + (19, 193)); MaterialX's float fractal2d at p + (19, 193) equals that channel exactly and \
+         differs from tessera's float fractal2d there by the same 2.3e-4 at 9 texels: single-precision rounding at \
+         octave coordinates of about 10³ (a float's last bit is 6e-5 there), not the vector code",
     ),
     ("docs/fractal3d.mtlx", "", "as fractal2d: the offset channel, evaluated at coordinates of about 10³"),
     (
