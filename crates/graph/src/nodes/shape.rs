@@ -10,8 +10,8 @@
 //! | `line` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.1), `point1` (0.25,0.25), `point2` (0.75,0.75) | 1 where the distance from `t − center` to the segment `point1–point2` is ≤ `radius` (round caps) | capsule coverage, as `circle` (the capsule's chord is the hull of its disks' and rectangle's chords) |
 //! | `hexagon` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.5) | 1 inside the regular hexagon of inradius `radius` with flat sides at `x = ±radius` (IQ's `sdHexagon` on `(|dy|, |dx|)`) | hexagon coverage, as `circle` (chords piecewise linear) |
 //! | `grid` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `thickness` (0.05), `staggered` (false) | 1 within `thickness/2` of an integer line of `t·tiling − offset` (odd rows shifted by ½ when staggered) | closed form, per axis: the Gaussian mass of the periodic bands (erf sums for σ < 0.4 cells, damped Fourier series above); `1 − (1 − P_x)(1 − P_y)` with row parity masses when staggered; exact for axis-aligned footprints |
-//! | `crosshatch` (color3) | as `grid` | 1 within `thickness` of a cell diagonal of `2·fract(t·tiling − offset) − 1` | per cell, the two diagonal strips (minus their overlap) clipped to the cell, each as `circle`; the global coverage once both per-axis σ exceed 0.6 cells (Fourier modes damped below 1e-7) |
-//! | `tiledcircles` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `size` (0.5), `staggered` (false) | disk of diameter `size` in each cell (clipped to it); staggered: rows of height √3/2 shifted by ½, disks of radius `size/2` at the triangle-lattice vertices | per cell, its disks clipped to the cell, as `circle`; the global coverage beyond 0.6 cells |
+//! | `crosshatch` (color3) | as `grid` | 1 within `thickness` of a cell diagonal of `2·fract(t·tiling − offset) − 1` | per cell, the two diagonal strips (minus their overlap) clipped to the cell, each as `circle`; from 0.1 cells of spread on both axes, the pattern's Fourier series (see below) |
+//! | `tiledcircles` (color3) | `texcoord` (UV0), `uvtiling` (1,1), `uvoffset` (0,0), `size` (0.5), `staggered` (false) | disk of diameter `size` in each cell (clipped to it); staggered: rows of height √3/2 shifted by ½, disks of radius `size/2` at the triangle-lattice vertices | per cell, its disks clipped to the cell, as `circle`; from 0.1 cells (rows) of spread on both axes, the pattern's Fourier series |
 //! | `tiledhexagons` (color3) | as `tiledcircles` | as `tiledcircles` with `hexagon`s (inradius `size/2`) | as `tiledcircles` |
 //! | `cloverleaf` (float) | `texcoord` (UV0), `center` (0,0), `radius` (0.5) | the union of four disks of radius `radius/2` centred `radius/2` left, right, above and below `center` (MaterialX's `NG_cloverleaf_float`: the `max` of four `circle`s) | the union of the four disks, as `circle` with the disks' chords merged at each height |
 //! | `tiledcloverleafs` (color3) | as `tiledcircles` | as `tiledcircles` with `cloverleaf`s of `radius` `size` in the cell's [−1, 1]² frame; staggered: rows of height ½ shifted by ½ every other row, cloverleafs of `radius` `size/2` at the lattice points | as `tiledcircles` |
@@ -21,7 +21,17 @@
 //! `∫ φ(y; m_y, s_y) [Φ((hi(y) − mₓ)/sₓ) − Φ((lo(y) − mₓ)/sₓ)] dy` with `[lo(y), hi(y)]` the chord
 //! of `K` at height `y`, integrated over the narrower axis (20-point Gauss–Legendre on the
 //! piece's extent within ±6σ): the sharp direction is in closed form, the quadrature only sees
-//! a Gaussian-smoothed chord length. Unions are sums of disjoint pieces (inclusion–exclusion
+//! a Gaussian-smoothed chord length.
+//!
+//! The tiled patterns (`crosshatch`, `tiledcircles`, `tiledhexagons`, `tiledcloverleafs`) visit
+//! the cells within ±6σ while the footprint is under 0.1 cells (rows) on either axis. From 0.1
+//! on both, they are the exact Gaussian convolution of their Fourier series over one period (1
+//! cell by 2 rows; |k| ≤ 12 per axis, from 256 × 256 point samples made once per pattern and
+//! thread), correlation of the footprint's axes included: every mode is damped by
+//! `e^{−2π² kᵀΣk}`, so at 0.1 cells the modes left out weigh below 1e-5 and at wide footprints
+//! only the mean (the coverage) remains. A footprint wide (over 0.6 cells) along one axis only
+//! and narrow along the other (a grazing view) takes the pattern's average along the wide axis,
+//! a 256-bin profile filtered along the narrow one. Unions are sums of disjoint pieces (inclusion–exclusion
 //! for the crosshatch's overlapping strips), or, for the cloverleafs' overlapping disks, the
 //! merged chords of all pieces at each height.
 
@@ -432,13 +442,27 @@ impl Piece {
 }
 
 const GL_N: usize = 20;
+/// The shorter rule [`union_coverage`] uses on each of several spans.
+const GL_SHORT: usize = 8;
 
 /// Gauss–Legendre nodes and weights on [−1, 1].
 fn gauss_legendre() -> &'static [(f64, f64); GL_N] {
     static R: OnceLock<[(f64, f64); GL_N]> = OnceLock::new();
-    R.get_or_init(|| {
-        let n = GL_N;
-        let mut out = [(0.0, 0.0); GL_N];
+    R.get_or_init(legendre_rule)
+}
+
+/// The 8-point Gauss–Legendre rule on [−1, 1].
+fn gauss_legendre_short() -> &'static [(f64, f64); GL_SHORT] {
+    static R: OnceLock<[(f64, f64); GL_SHORT]> = OnceLock::new();
+    R.get_or_init(legendre_rule)
+}
+
+/// The `N`-point Gauss–Legendre nodes and weights, by Newton's method on the Legendre
+/// polynomial.
+fn legendre_rule<const N: usize>() -> [(f64, f64); N] {
+    {
+        let n = N;
+        let mut out = [(0.0, 0.0); N];
         for i in 0..n {
             let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
             let mut dp = 1.0;
@@ -459,7 +483,7 @@ fn gauss_legendre() -> &'static [(f64, f64); GL_N] {
             out[i] = (x, 2.0 / ((1.0 - x * x) * dp * dp));
         }
         out
-    })
+    }
 }
 
 /// Φ-mass of `(lo, hi)` under `N(m, s²)` and its derivative in `m`.
@@ -515,15 +539,32 @@ const MAX_UNION: usize = 12;
 /// Coverage of the union of (possibly overlapping) pieces under `N(m, diag(s²))`, as
 /// [`coverage`] but with the chords of all pieces at each height merged into disjoint
 /// intervals first: a union with no inclusion–exclusion terms to find. The narrower axis is
-/// integrated piecewise between the pieces' extents (20-point Gauss–Legendre on each span),
+/// integrated piecewise between the pieces' extents (Gauss–Legendre on each span: 20 points
+/// for up to two spans, 8 for more), only the pieces whose box meets the footprint's taken,
 /// so that each span sees chords that begin and end only at its ends.
 fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     debug_assert!(pieces.len() <= MAX_UNION && pieces.iter().all(|p| p.sign == 1.0));
-    let pieces = &pieces[..pieces.len().min(MAX_UNION)];
     let k = if s.x <= s.y { 0 } else { 1 };
     let o = 1 - k;
     let (mk, sk) = (get(m, k), get(s, k));
     let (mo, so) = (get(m, o), get(s, o).max(1e-12));
+    // Only the pieces whose box meets the footprint's (±7σ) count.
+    let mut near = [pieces[0]; MAX_UNION];
+    let mut n = 0;
+    for pc in pieces.iter().take(MAX_UNION) {
+        let meets = |axis: usize, c: f64, r: f64| {
+            let (a, b) = pc.extent(axis);
+            a < c + 7.0 * r && b > c - 7.0 * r
+        };
+        if meets(k, mk, sk) && meets(o, mo, so) {
+            near[n] = *pc;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return (0.0, DVec2::ZERO);
+    }
+    let pieces = &near[..n];
     // The mass of the union of the chords at height t, and its derivative in the centre.
     let at = |t: f64| -> (f64, f64) {
         let mut ch = [(0.0f64, 0.0f64); MAX_UNION];
@@ -543,7 +584,7 @@ fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
             match cur {
                 Some((a, b)) if lo <= b => cur = Some((a, b.max(hi))),
                 _ => {
-                    if let Some((a, b)) = cur {
+                    if let Some((a, b)) = cur.filter(|(a, b)| *b > mo - 9.0 * so && *a < mo + 9.0 * so) {
                         let (p, d) = interval(a, b, mo, so);
                         q += p;
                         dq += d;
@@ -578,6 +619,9 @@ fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     }
     let cuts = &mut cuts[..n];
     cuts.sort_unstable_by(f64::total_cmp);
+    let spans = cuts.windows(2).filter(|w| w[1] > w[0]).count();
+    // One span takes the long rule; several share the work, the short rule on each.
+    let rule: &[(f64, f64)] = if spans <= 2 { gauss_legendre() } else { gauss_legendre_short() };
     let mut p = 0.0;
     for w in cuts.windows(2) {
         let (a, b) = (w[0], w[1]);
@@ -585,7 +629,7 @@ fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
             continue;
         }
         let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
-        for &(x, wt) in gauss_legendre() {
+        for &(x, wt) in rule {
             let t = mid + half * x;
             let z = (t - mk) / sk;
             let wt = wt * half * pdf(z) / sk;
@@ -681,7 +725,7 @@ fn grid(ins: &[Filtered]) -> Moments {
 // ---------------------------------------------------------------------------------------------
 // Tiled patterns.
 
-/// Per-axis spread (cells) beyond which a tiled pattern is its coverage.
+/// Per-axis spread (cells) beyond which a tiled pattern is its average along that axis.
 const TILE_SIGMA_GLOBAL: f64 = 0.6;
 /// Most cells visited per axis.
 const MAX_CELLS: i64 = 48;
@@ -754,47 +798,220 @@ impl Tiled {
         matches!(self, Tiled::Shapes { motif: Motif::Clover, .. })
     }
 
-    /// What identifies the pattern for [`Tiled::global`]'s memo.
+    /// What identifies the pattern for the memos of its [`Series`] and profiles.
     fn key(&self) -> (u8, u64) {
         match *self {
             Tiled::Cross { th, staggered } => (staggered as u8, th.to_bits()),
             Tiled::Shapes { size, staggered, motif } => (2 + staggered as u8 + 2 * motif as u8, size.to_bits()),
         }
     }
+}
 
-    /// Coverage over one period, remembered per thread for the last few patterns: the sum it
-    /// comes from (65 536 point evaluations) would otherwise be paid by every evaluation at a
-    /// footprint that covers many tiles.
-    fn global(&self) -> f64 {
-        type Memo = [Option<((u8, u64), f64)>; 4];
-        thread_local! {
-            static MEMO: std::cell::Cell<Memo> = const { std::cell::Cell::new([None; 4]) };
-        }
-        let key = self.key();
-        let mut memo = MEMO.get();
-        if let Some((_, c)) = memo.iter().flatten().find(|(k, _)| *k == key) {
-            return *c;
-        }
-        let c = self.global_sum();
-        memo.rotate_right(1);
-        memo[0] = Some((key, c));
-        MEMO.set(memo);
-        c
-    }
+/// Fourier modes a [`Series`] keeps per axis (`|k| ≤ FOURIER_K`).
+const FOURIER_K: usize = 12;
+const FK: usize = 2 * FOURIER_K + 1;
+/// Spread (in cells along x, in rows along y) from which a tiled pattern is filtered by its
+/// Fourier series: the modes it drops are then damped below 1e-5 of the fundamental.
+const TILE_SIGMA_FOURIER: f64 = 0.1;
 
-    /// Coverage over one period (by sampling the point function).
-    fn global_sum(&self) -> f64 {
-        let h = self.row_height() * 2.0;
-        let n = 256;
-        let mut acc = 0.0;
-        for a in 0..n {
-            for b in 0..n {
-                let q = Vec2::new((a as f32 + 0.5) / n as f32 * 2.0, (b as f32 + 0.5) / n as f32 * h as f32);
-                acc += self.point(q) as f64;
+/// A tiled pattern's Fourier series over its period (1 cell along x, two rows along y):
+/// `c[ky][kx]` for `kx, ky ∈ [−K, K]`, from 256 × 256 point samples.
+struct Series {
+    c: Box<[[(f64, f64); FK]; FK]>,
+    period: DVec2,
+}
+
+impl Series {
+    /// The Gaussian average at `N(m, Σ)`: `Re Σ_k c_k e^{2πi k·m/P} e^{−2π² (k/P)ᵀ Σ (k/P)}`
+    /// (exact for the sampled pattern, correlation included), and its gradient in `m`.
+    fn average(&self, m: DVec2, cov: [f64; 3]) -> (f64, DVec2) {
+        use std::f64::consts::PI;
+        let (px, py) = (self.period.x, self.period.y);
+        let a = 2.0 * PI * PI * cov[0] / (px * px);
+        let b = 2.0 * PI * PI * cov[2] / (py * py);
+        let c = 4.0 * PI * PI * cov[1] / (px * py);
+        let k = FOURIER_K as i64;
+        // Powers of the unit phase e^{2πi t} for k = −K…K.
+        let powers = |t: f64, out: &mut [(f64, f64); FK]| {
+            let (sn, cs) = (2.0 * PI * t).sin_cos();
+            out[FOURIER_K] = (1.0, 0.0);
+            for j in 1..=FOURIER_K {
+                let (re, im) = out[FOURIER_K + j - 1];
+                out[FOURIER_K + j] = (re * cs - im * sn, re * sn + im * cs);
+                out[FOURIER_K - j] = (out[FOURIER_K + j].0, -out[FOURIER_K + j].1);
+            }
+        };
+        let (mut ux, mut uy) = ([(0.0, 0.0); FK], [(0.0, 0.0); FK]);
+        powers(m.x.rem_euclid(px) / px, &mut ux);
+        powers(m.y.rem_euclid(py) / py, &mut uy);
+        let (mut p, mut gx, mut gy) = (0.0, 0.0, 0.0);
+        for ky in -k..=k {
+            let dy = (-b * (ky * ky) as f64).exp();
+            if dy < 1e-12 {
+                continue;
+            }
+            let (yr, yi) = uy[(ky + k) as usize];
+            for kx in -k..=k {
+                // One exponent: the quadratic form is ≥ 0, its cross term alone is not.
+                let (fx, fy) = (kx as f64, ky as f64);
+                let d = (-(a * fx * fx + b * fy * fy + c * fx * fy)).exp();
+                if d < 1e-12 {
+                    continue;
+                }
+                let (xr, xi) = ux[(kx + k) as usize];
+                let (er, ei) = (xr * yr - xi * yi, xr * yi + xi * yr);
+                let (cr, ci) = self.c[(ky + k) as usize][(kx + k) as usize];
+                // Re(c e), and Re(c e · 2πi k/P) = −2π k/P · Im(c e).
+                let (re, im) = (cr * er - ci * ei, cr * ei + ci * er);
+                p += d * re;
+                gx -= d * im * 2.0 * PI * kx as f64 / px;
+                gy -= d * im * 2.0 * PI * ky as f64 / py;
             }
         }
-        acc / (n * n) as f64
+        (p, DVec2::new(gx, gy))
     }
+}
+
+/// Bins of a [`Tiled::profile`] over its period.
+const PROFILE_BINS: usize = 256;
+
+impl Tiled {
+    /// The pattern's [`Series`], handed to `f`; remembered per thread for the last few patterns.
+    fn series<R>(&self, f: impl FnOnce(&Series) -> R) -> R {
+        type Memo = Vec<((u8, u64), Series)>;
+        thread_local! {
+            static MEMO: std::cell::RefCell<Memo> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let key = self.key();
+        MEMO.with_borrow_mut(|memo| {
+            if let Some(k) = memo.iter().position(|(p, _)| *p == key) {
+                return f(&memo[k].1);
+            }
+            let series = self.make_series();
+            let r = f(&series);
+            if memo.len() == 4 {
+                memo.remove(0);
+            }
+            memo.push((key, series));
+            r
+        })
+    }
+
+    fn make_series(&self) -> Series {
+        use std::f64::consts::TAU;
+        const N: usize = 256;
+        let period = DVec2::new(1.0, 2.0 * self.row_height());
+        // e^{−2πi k (j + ½)/N} for k = 0…K, per sample j.
+        let mut trig = vec![[(0.0f64, 0.0f64); FOURIER_K + 1]; N];
+        for (j, row) in trig.iter_mut().enumerate() {
+            for (k, t) in row.iter_mut().enumerate() {
+                let (sn, cs) = (-TAU * k as f64 * (j as f64 + 0.5) / N as f64).sin_cos();
+                *t = (cs, sn);
+            }
+        }
+        let at = |k: i64, j: usize| {
+            let (re, im) = trig[j][k.unsigned_abs() as usize];
+            (re, if k < 0 { -im } else { im })
+        };
+        let kk = FOURIER_K as i64;
+        // Along x first, per row of samples; then along y.
+        let mut rows = vec![[(0.0f64, 0.0f64); FK]; N];
+        for (b, row) in rows.iter_mut().enumerate() {
+            let y = (b as f64 + 0.5) / N as f64 * period.y;
+            for a in 0..N {
+                let x = (a as f64 + 0.5) / N as f64 * period.x;
+                let v = self.point(Vec2::new(x as f32, y as f32)) as f64;
+                if v == 0.0 {
+                    continue;
+                }
+                for kx in -kk..=kk {
+                    let (re, im) = at(kx, a);
+                    let r = &mut row[(kx + kk) as usize];
+                    r.0 += v * re;
+                    r.1 += v * im;
+                }
+            }
+        }
+        let mut c = Box::new([[(0.0f64, 0.0f64); FK]; FK]);
+        let norm = 1.0 / (N * N) as f64;
+        for ky in -kk..=kk {
+            for kx in 0..FK {
+                let (mut sr, mut si) = (0.0, 0.0);
+                for (b, row) in rows.iter().enumerate() {
+                    let (er, ei) = at(ky, b);
+                    let (vr, vi) = row[kx];
+                    sr += vr * er - vi * ei;
+                    si += vr * ei + vi * er;
+                }
+                c[(ky + kk) as usize][kx] = (sr * norm, si * norm);
+            }
+        }
+        Series { c, period }
+    }
+
+    /// The pattern averaged over the other axis, along `axis` (0: x over a period of 2 cells,
+    /// 1: y over two rows), in [`PROFILE_BINS`] bins, handed to `f`; remembered per thread for
+    /// the last few patterns, as the [`Series`]: the 65 536 point evaluations it takes are
+    /// paid once.
+    fn profile(&self, axis: usize, f: impl FnOnce(&[f32; PROFILE_BINS]) -> (f64, f64)) -> (f64, f64) {
+        type Memo = Vec<((u8, u64), usize, Box<[f32; PROFILE_BINS]>)>;
+        thread_local! {
+            static MEMO: std::cell::RefCell<Memo> = const { std::cell::RefCell::new(Vec::new()) };
+        }
+        let key = self.key();
+        MEMO.with_borrow_mut(|memo| {
+            if let Some(k) = memo.iter().position(|(p, a, _)| *p == key && *a == axis) {
+                return f(&memo[k].2);
+            }
+            let periods = [2.0, self.row_height() * 2.0];
+            let n = PROFILE_BINS;
+            let mut bins = Box::new([0.0f32; PROFILE_BINS]);
+            for (b, v) in bins.iter_mut().enumerate() {
+                let mut acc = 0.0f64;
+                for a in 0..n {
+                    let along = (b as f64 + 0.5) / n as f64 * periods[axis];
+                    let across = (a as f64 + 0.5) / n as f64 * periods[1 - axis];
+                    let q = if axis == 0 {
+                        Vec2::new(along as f32, across as f32)
+                    } else {
+                        Vec2::new(across as f32, along as f32)
+                    };
+                    acc += self.point(q) as f64;
+                }
+                *v = (acc / n as f64) as f32;
+            }
+            let r = f(&bins);
+            if memo.len() == 4 {
+                memo.remove(0);
+            }
+            memo.push((key, axis, bins));
+            r
+        })
+    }
+}
+
+/// The Gaussian average of a periodic piecewise-constant profile (`bins` over `period`) at
+/// `N(m, s²)`, and its derivative in `m`.
+fn profile_average(bins: &[f32], period: f64, m: f64, s: f64) -> (f64, f64) {
+    let n = bins.len() as f64;
+    let w = period / n;
+    // Bins within ±7σ.
+    let first = ((m - 7.0 * s) / w).floor();
+    let last = ((m + 7.0 * s) / w).floor();
+    let (mut p, mut d) = (0.0, 0.0);
+    let edge = |e: f64| {
+        let z = (e * w - m) / s;
+        (cdf(z), pdf(z) / s)
+    };
+    let mut lo = edge(first);
+    for b in crate::gaussian::cells(first, last) {
+        let hi = edge(b + 1.0);
+        let v = bins[b.rem_euclid(n) as usize] as f64;
+        p += v * (hi.0 - lo.0);
+        d += v * (lo.1 - hi.1);
+        lo = hi;
+    }
+    (p, d)
 }
 
 fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
@@ -808,11 +1025,27 @@ fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
     }
     let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
     let (m, s, j) = coord(&ins[0], tile, off);
-    if s.x.min(s.y / pat.row_height()) > TILE_SIGMA_GLOBAL {
-        let c = pat.global();
-        return Moments { mean: c as f32, grad: Vec2::ZERO, var: (c * (1.0 - c)) as f32 };
-    }
     let h = pat.row_height();
+    if s.x >= TILE_SIGMA_FOURIER && s.y / h >= TILE_SIGMA_FOURIER {
+        // The footprint's covariance in cells, correlation included.
+        let cxy = crate::moments::cov(&ins[0].ch[0], &ins[0].ch[1], ctx.fp) as f64 * tile.x * tile.y;
+        let (p, dp) = pat.series(|series| series.average(m, [s.x * s.x, cxy, s.y * s.y]));
+        ctx.work.lattice += 1;
+        return indicator(p.clamp(0.0, 1.0), dp, &j);
+    }
+    let wide = [s.x > TILE_SIGMA_GLOBAL, s.y / h > TILE_SIGMA_GLOBAL];
+    // Wide along one axis only (a grazing footprint): the pattern averaged along that axis,
+    // filtered along the other. Not where the narrow spread is below two of the profile's
+    // bins, whose steps would then show.
+    for axis in 0..2 {
+        let period = [2.0, 2.0 * h][axis];
+        if wide[1 - axis] && !wide[axis] && get(s, axis) > 2.0 * period / PROFILE_BINS as f64 {
+            let (p, dp) = pat.profile(axis, |bins| profile_average(bins, period, get(m, axis), get(s, axis)));
+            ctx.work.lattice += 1;
+            let g = if axis == 0 { DVec2::new(dp, 0.0) } else { DVec2::new(0.0, dp) };
+            return indicator(p.clamp(0.0, 1.0), g, &j);
+        }
+    }
     let span = |m: f64, s: f64, unit: f64| {
         let lo = ((m - 6.0 * s) / unit).floor() as i64 - 1;
         let hi = ((m + 6.0 * s) / unit).floor() as i64 + 1;

@@ -49,6 +49,7 @@ const DEMOS: &[Demo] = &[
         materials: &["M_tiles", "M_planks"],
         tuned: false,
     },
+    Demo { file: "poster_wall.mtlx", graphs: &["NG_poster"], materials: &["M_poster"], tuned: true },
 ];
 
 /// The scenes and the documents they use.
@@ -59,6 +60,7 @@ const SCENES: &[(&str, &str)] = &[
     ("rusted_metal.xml", "rusted_metal.mtlx"),
     ("plane_ramp.xml", "plane_ramp.mtlx"),
     ("tiles_planks.xml", "tiles_planks.mtlx"),
+    ("poster_wall.xml", "poster_wall.mtlx"),
 ];
 
 fn load(file: &str) -> Document {

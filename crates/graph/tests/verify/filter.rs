@@ -436,6 +436,9 @@ fn filtered_matches_supersampling() {
         for r in &rows {
             let (sigma, ef, ep, spread, sd, ratio) = (r.sigma, r.filtered, r.point, r.spread, r.node_sigma, r.ratio());
             println!("{}", common::sweep_line(case.name, r));
+            if !(ef.is_finite() && sd.is_finite()) {
+                failures.push(format!("{} σ={sigma}: filtered error {ef} and σ {sd}: not finite", case.name));
+            }
             // Small footprints: the filtered value is the unfiltered one.
             if sigma <= 1e-4 && ef > 2e-3 {
                 failures.push(format!("{} σ={sigma}: filtered error {ef:.2e} at a tiny footprint", case.name));
