@@ -163,6 +163,7 @@ def main():
             "channels": names,
             "bake": bake,
             "resolution": [w, h],
+            "orientation": "row 0 = top; texel (i,j) at u=(i+0.5)/W, v=1-(j+0.5)/H",
             "min": mins,
             "max": maxs,
             "nonfinite_texels": nonfinite,
