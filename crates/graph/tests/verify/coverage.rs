@@ -175,8 +175,12 @@ fn load(nd: &NodeDef) -> Result<(), String> {
     }
     let body = if material { top } else { format!("<nodegraph name=\"g\">\n{node}{graph_outputs}</nodegraph>\n") };
     let text = format!("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n{body}</materialx>\n");
-    let doc = Document::parse(&text, Path::new("coverage.mtlx"), &LoadOptions::default())
-        .map_err(|e| e.to_string().lines().next().unwrap_or_default().to_string())?;
+    let doc = Document::parse(&text, Path::new("coverage.mtlx"), &LoadOptions::default()).map_err(|e| {
+        // The first line, without the list of supported nodes that unsupported ones carry.
+        let s = e.to_string();
+        let line = s.lines().next().unwrap_or_default();
+        line.split("; supported nodes").next().unwrap_or_default().to_string()
+    })?;
     if material {
         return match doc.material("m") {
             Some(_) => Ok(()),
