@@ -125,8 +125,9 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
         "docs/switch.mtlx",
         "",
         "tessera differs: where `which` ≥ 10 MaterialX 1.39.5's NG_switch gives 0 (no input selected); tessera \
-         gives in10 for every `which` ≥ 9 (the last column, which = 10.4), the rule its upgrade of five-input 1.38 \
-         switches relies on",
+         gives in10 for every `which` ≥ 9 (the last column, which = 10.4). MaterialX 1.39.5 likewise renders a \
+         five-input 1.38 switch as 0 from `which` ≥ 5 (its in6 … in10 default to 0), where tessera's upgrade keeps \
+         in5",
     ),
 ];
 
