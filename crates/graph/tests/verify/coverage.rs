@@ -269,3 +269,36 @@ fn every_stdlib_nodedef_is_implemented_or_rejected() {
         stale.join("\n")
     );
 }
+
+/// tessera's own references (`tests/mtlx-refs`) bake every nodedef whose outputs are all values,
+/// and skip only the others, each output once at least.
+#[test]
+fn own_references_cover_every_value_nodedef() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/mtlx-refs/manifest.json");
+    let manifest: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let mut baked: BTreeMap<String, Vec<String>> = BTreeMap::new();
+    for b in manifest["bakes"].as_array().unwrap() {
+        let element = b["element"].as_str().unwrap();
+        let output = element.rsplit('/').next().unwrap().to_string();
+        baked.entry(b["nodedef"].as_str().unwrap().to_string()).or_default().push(output);
+    }
+    let skipped: Vec<&str> =
+        manifest["skipped"].as_array().unwrap().iter().map(|s| s["nodedef"].as_str().unwrap()).collect();
+    let mut problems = Vec::new();
+    for nd in nodedefs() {
+        let value = nd.outputs.iter().all(|(_, ty)| graph_type(ty));
+        match (value, baked.get(&nd.name), skipped.contains(&nd.name.as_str())) {
+            (true, Some(outs), false) => {
+                for (o, _) in &nd.outputs {
+                    if !outs.contains(o) {
+                        problems.push(format!("{}: output {o} is not baked", nd.name));
+                    }
+                }
+            }
+            (true, _, _) => problems.push(format!("{} has value outputs but no bake", nd.name)),
+            (false, None, true) => {}
+            (false, _, _) => problems.push(format!("{} has a non-value output but is not listed as skipped", nd.name)),
+        }
+    }
+    assert!(problems.is_empty(), "own references out of step with the nodedef table:\n{}", problems.join("\n"));
+}
