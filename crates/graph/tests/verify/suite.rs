@@ -249,10 +249,18 @@ struct RefSet {
     notes: &'static [(&'static str, &'static str, &'static str)],
 }
 
-/// Bakes and compares every entry of a reference set: rows per document (named with the set's
-/// prefix), the entries whose image bound would not reject a v-flipped bake, and the nodedef of
-/// each element where the manifest names one.
-fn run(set: &RefSet) -> (BTreeMap<String, Vec<Row>>, Vec<String>, BTreeMap<(String, String), String>) {
+/// What comparing a reference set found.
+struct Run {
+    /// Rows per document, named with the set's prefix.
+    rows: BTreeMap<String, Vec<Row>>,
+    /// Entries whose image bound would not reject a v-flipped bake.
+    weak: Vec<String>,
+    /// The nodedef of each (document, element), where the manifest names one.
+    nodedefs: BTreeMap<(String, String), String>,
+}
+
+/// Bakes and compares every entry of a reference set.
+fn run(set: &RefSet) -> Run {
     let root = &set.root;
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(root.join("manifest.json")).unwrap()).unwrap();
@@ -344,7 +352,7 @@ fn run(set: &RefSet) -> (BTreeMap<String, Vec<Row>>, Vec<String>, BTreeMap<(Stri
         };
         rows.entry(name).or_default().push(Row { element, outcome });
     }
-    (rows, weak, nodedefs)
+    Run { rows, weak, nodedefs }
 }
 
 /// Pass, fail and unsupported counts of some rows.
@@ -390,8 +398,8 @@ fn materialx_conformance() {
         images,
         notes: OWN_NOTES,
     };
-    let (rows, mut weak, _) = run(&suite);
-    let (own_rows, own_weak, own_nodedefs) = run(&own);
+    let Run { rows, mut weak, .. } = run(&suite);
+    let Run { rows: own_rows, weak: own_weak, nodedefs: own_nodedefs } = run(&own);
     let own_manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(own.root.join("manifest.json")).unwrap()).unwrap();
     let own_resolution = own_manifest["resolution"][0].as_u64().unwrap_or(0);
