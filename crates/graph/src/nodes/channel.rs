@@ -1,12 +1,13 @@
 //! Channel nodes: `combine2`, `combine3`, `combine4`, `extract`, `separate2`, `separate3`,
-//! `separate4`, `convert`. All are exact (they only move channels).
+//! `separate4`, `convert`. All are exact (they only move channels), except `convert` of an
+//! integer to a boolean.
 //!
 //! | node | inputs (default) | output |
 //! |---|---|---|
 //! | `combineN` | `in1` … `inN` (0); inputs may be vectors (`combine2` of a color3 and a float gives a color4) | channels concatenated |
 //! | `extract` | `in` (0), `index` (0) | channel `index` |
 //! | `separateN` | `in` (0) | multi-output: `outx`/`outr`, `outy`/`outg`, ... (a connection picks one channel) |
-//! | `convert` | `in` (0) | a float is broadcast; extra channels are 0 (alpha / w: 1); surplus channels dropped |
+//! | `convert` | `in` (0) | a float is broadcast; extra channels are 0 (alpha / w: 1); surplus channels dropped; integer to boolean is `in != 0` |
 
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::graph::Source;
@@ -96,6 +97,9 @@ pub(crate) fn eval(op: &ChannelOp, ty: ValueType, ins: &[Filtered], _ctx: &mut C
             out.ch[0] = ins[0].ch[idx];
         }
         ChannelOp::Separate => out.ch = ins[0].ch,
+        ChannelOp::Convert if ty == ValueType::Boolean && ins[0].ty == ValueType::Integer => {
+            out.ch[0] = nonzero(ins[0].ch[0]);
+        }
         ChannelOp::Convert => {
             let a = &ins[0];
             for k in 0..n {
@@ -112,4 +116,16 @@ pub(crate) fn eval(op: &ChannelOp, ty: ValueType, ins: &[Filtered], _ctx: &mut C
         }
     }
     out
+}
+
+/// An integer's `in != 0` (MaterialX's `NG_convert_integer_boolean`): at a point the plain test;
+/// over a footprint, with the integer taken as `N(m, s²)` rounded, the probability that it is
+/// not 0, as `ifequal` of integers does.
+fn nonzero(x: Moments) -> Moments {
+    let (m, s) = (x.mean as f64, x.sigma() as f64);
+    if s == 0.0 {
+        return Moments::constant(if x.mean != 0.0 { 1.0 } else { 0.0 });
+    }
+    let p = 1.0 - crate::gaussian::mass((-0.5 - m) / s, (0.5 - m) / s);
+    Moments { mean: p as f32, grad: glam::Vec2::ZERO, var: (p * (1.0 - p)) as f32 }
 }

@@ -17,7 +17,7 @@
 //! | `transformpoint`, `transformvector` | `in` (0,0,0), `fromspace`, `tospace` | identity (exact) |
 //! | `transformnormal` | `in` (0,0,1), `fromspace`, `tospace` | `normalize(in)` (MaterialX normalises), by cubature |
 //! | `transformmatrix` | `in` (0), `mat` (identity; a matrix folded at load, see [`crate::matrix`]) | affine `v · M` (vector2 with a matrix33 and vector3 with a matrix44 extended by a homogeneous 1): exact |
-//! | `dot` | `in` (0) | pass-through |
+//! | `dot` | `in` (0), `note` (a comment, ignored) | pass-through |
 //! | `blur` | `in` (0), `size` (0), `filtertype` | pass-through, as MaterialX's GLSL (which blurs image inputs only), with a warning unless `size` is 0: the footprint filtering every node gets is the blur tessera applies |
 //!
 //! Spaces: tessera transforms meshes and shapes to world space at load and keeps no object
@@ -133,7 +133,7 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
         "transformmatrix" => (&[inp!("in", Out, Zero)], &["mat"], |t| {
             matches!(t, ValueType::Vector2 | ValueType::Vector3 | ValueType::Vector4)
         }),
-        "dot" => (&[inp!("in", Out, Zero)], &[], types::numeric),
+        "dot" => (&[inp!("in", Out, Zero)], &["note"], types::numeric),
         "blur" => (&[inp!("in", Out, Zero), inp!("size", Float, Zero)], &["filtertype"], types::float_or_vector),
         _ => return None,
     };

@@ -8,9 +8,9 @@
 //! | `ramp4` | `valuetl`,`valuetr`,`valuebl`,`valuebr` (0), `texcoord` | bilinear in the clamped coordinates | as the ramps, per axis |
 //! | `ramp` (color4) | `texcoord` (UV0), `type` (0), `interpolation` (1), `num_intervals` (2), `interval1` (0), `color1` (0,0,0,1), `interval2`…`interval10` (1), `color2`…`color10` (1,1,1,1) | see below | the ramp is a piecewise polynomial `f(x)` (degree ≤ 3) of one coordinate `x`: exact closed-form mean, variance and slope of `f(X)` for Gaussian `X` (piece moments plus the jumps' densities); `x` is exactly Gaussian for `type` 0 (`u`), and for types 1–3 its mean and variance come from cubature over the texcoord's spread (radial: unwrapped around the centre's angle and the ramp extended periodically) |
 //! | `splitlr` / `splittb` | `valuel`,`valuer` / `valuet`,`valueb` (0), `center` (0.5), `texcoord` | `valuer` where `u ≥ center` / `valuet` where `v ≥ center` | the footprint's mass beyond the split, `Φ((m − c)/σ)` |
-//! | `randomfloat` | `in` (0), `min` (0), `max` (1), `seed` (0) | cell noise of `(in, seed)` mapped to `[min, max]` | evaluated at the mean of `in` (a per-object value, normally uniform) |
+//! | `randomfloat` | `in` (0), `min` (0), `max` (1), `seed` (0) | cell noise of `(in · 4096, seed)` (`(in, seed)` for an integer `in`) mapped to `[min, max]`, as MaterialX's graphs | evaluated at the mean of `in` (a per-object value, normally uniform) |
 //! | `ramp_gradient` (color4) | `x` (0), `interval1` (0), `interval2` (1), `color1` (0,0,0,1), `color2` (1,1,1,1), `interpolation` (1), `prev_color` (0,0,0,1), `interval_num` (1), `num_intervals` (2) | one interval of `ramp`, as MaterialX's `NG_ramp_gradient`: `prev_color` where `interval_num ≥ num_intervals` or `x ≤ interval1`, else `mix(color1, color2, t)` with `t` the clamped linear (0) or smoothstep (1) position in the interval, or `color1` below `interval2` and `color2` from it (2) | MaterialX's graph, each step by its node's rule (`clamp`, `remap`, `smoothstep`, `switch`, `mix`, `ifgreater`, `ifgreatereq`) |
-//! | `randomcolor` | `in` (0), `huelow` (0), `huehigh` (1), `saturationlow` (0), `saturationhigh` (1), `brightnesslow` (0), `brightnesshigh` (1), `seed` (0) | HSV from three cell-noise values of `(in, seed + k)` | as `randomfloat` |
+//! | `randomcolor` | `in` (0), `huelow` (0), `huehigh` (1), `saturationlow` (0), `saturationhigh` (1), `brightnesslow` (0), `brightnesshigh` (1), `seed` (0) | HSV from three `randomfloat`s of the float `in` with seeds `ceil(seed + 413.3)`, `ceil(seed + 1522.4)`, `ceil(seed + 1813.8)`, as MaterialX's graph | as `randomfloat` |
 
 //!
 //! `ramp` is MaterialX 1.39's gradient (its `NG_ramp` graph): `x` is `u` (`type` 0, standard),
@@ -62,8 +62,9 @@ pub enum PatternOp {
     SplitLr,
     /// `splittb`
     SplitTb,
-    /// `randomfloat`
-    RandomFloat,
+    /// `randomfloat`; `in` is scaled by `scale` before its cell is taken: 4096 for a float `in`,
+    /// 1 for an integer one, as MaterialX's `NG_randomfloat_float` and `NG_randomfloat_integer`.
+    RandomFloat { scale: f32 },
     /// `randomcolor`
     RandomColor,
 }
@@ -182,7 +183,14 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     Some(NodeDef { category, inputs, params: &[], types, build })
 }
 
-fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param]) -> Result<Op, String> {
+/// The factor MaterialX's `NG_randomfloat_float` applies to a float `in` before the cell noise.
+const RANDOM_SCALE: f32 = 4096.0;
+
+/// MaterialX's `NG_randomcolor_float` seeds: hue, saturation and brightness draw `randomfloat`
+/// with seed `ceil(seed + offset)`.
+const RANDOM_COLOR_SEEDS: [f32; 3] = [413.3, 1522.4, 1813.8];
+
+fn build(category: &str, _: ValueType, in_types: &[ValueType], _: &[Source], _: &[Param]) -> Result<Op, String> {
     Ok(Op::Pattern(match category {
         "checkerboard" => PatternOp::Checkerboard,
         "ramplr" => PatternOp::RampLr,
@@ -192,7 +200,9 @@ fn build(category: &str, _: ValueType, _: &[ValueType], _: &[Source], _: &[Param
         "ramp_gradient" => PatternOp::RampGradient,
         "splitlr" => PatternOp::SplitLr,
         "splittb" => PatternOp::SplitTb,
-        "randomfloat" => PatternOp::RandomFloat,
+        "randomfloat" => PatternOp::RandomFloat {
+            scale: if in_types.first() == Some(&ValueType::Integer) { 1.0 } else { RANDOM_SCALE },
+        },
         _ => PatternOp::RandomColor,
     }))
 }
@@ -579,9 +589,9 @@ fn checker_weight(ins: &[Filtered], ctx: &mut Ctx) -> Moments {
     Moments { mean: p as f32, grad: -ds * 0.5, var: (p * (1.0 - p)).max(0.0) as f32 }
 }
 
-/// Unfiltered randomfloat's unit value: MaterialX cell noise at `(in, seed)`.
-fn random01(x: f32, seed: f32) -> f32 {
-    cell_float(x.floor() as i32, seed.floor() as i32)
+/// Unfiltered randomfloat's unit value: MaterialX cell noise at `(in · scale, seed)`.
+fn random01(x: f32, scale: f32, seed: f32) -> f32 {
+    cell_float((x * scale).floor() as i32, seed.floor() as i32)
 }
 
 /// `ramp_gradient`, as MaterialX's graph composes it from other nodes.
@@ -641,9 +651,9 @@ pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
             let t = step(ins[2].ch[0].mean, ins[3].ch[1]);
             mix_all(ty, &ins[1], &ins[0], t, ctx)
         }
-        PatternOp::RandomFloat => {
+        PatternOp::RandomFloat { scale } => {
             let (x, lo, hi, seed) = (ins[0].ch[0].mean, ins[1].ch[0], ins[2].ch[0], ins[3].ch[0].mean);
-            let r = Moments::constant(random01(x, seed));
+            let r = Moments::constant(random01(x, *scale, seed));
             let mut o = Filtered::zero(ty);
             o.ch[0] = mix(lo, hi, r, ctx.fp);
             o
@@ -651,9 +661,12 @@ pub(crate) fn eval(op: &PatternOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ct
         PatternOp::RandomColor => {
             let x = ins[0].ch[0].mean;
             let seed = ins[7].ch[0].mean;
-            let h = mix(ins[1].ch[0], ins[2].ch[0], Moments::constant(random01(x, seed)), ctx.fp);
-            let s = mix(ins[3].ch[0], ins[4].ch[0], Moments::constant(random01(x, seed + 1.0)), ctx.fp);
-            let v = mix(ins[5].ch[0], ins[6].ch[0], Moments::constant(random01(x, seed + 2.0)), ctx.fp);
+            // An integer `in` is converted to float first (NG_randomcolor_integer), so both
+            // variants scale it.
+            let draw = |k: usize| Moments::constant(random01(x, RANDOM_SCALE, (seed + RANDOM_COLOR_SEEDS[k]).ceil()));
+            let h = mix(ins[1].ch[0], ins[2].ch[0], draw(0), ctx.fp);
+            let s = mix(ins[3].ch[0], ins[4].ch[0], draw(1), ctx.fp);
+            let v = mix(ins[5].ch[0], ins[6].ch[0], draw(2), ctx.fp);
             let mut o = Filtered::zero(ty);
             for k in 0..3 {
                 o.ch[k] = moments::nary(&[h, s, v], |p| super::color::hsv_to_rgb([p[0], p[1], p[2]])[k]);

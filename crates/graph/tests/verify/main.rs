@@ -5,6 +5,7 @@ mod api;
 mod bakes;
 mod common;
 mod cost;
+mod coverage;
 mod demo_graphs;
 mod errors;
 mod filter;
