@@ -451,7 +451,7 @@ pub(crate) fn eval(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
 
 /// `latlongimage`: the lookup at the direction's longitude and latitude.
 pub(crate) fn eval_latlong(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    use std::f64::consts::TAU;
+    use std::f64::consts::{FRAC_1_PI, TAU};
     let d = &ins[1];
     let xs = [d.ch[0], d.ch[1], d.ch[2], ins[2].ch[0]];
     // The longitude is unwrapped around the mean direction's, so that the cubature's points on
@@ -459,9 +459,9 @@ pub(crate) fn eval_latlong(t: &Texture, ty: ValueType, ins: &[Filtered], ctx: &m
     let a0 = (d.ch[0].mean as f64).atan2(d.ch[2].mean as f64);
     let lon = move |p: &[f64]| {
         let da = p[0].atan2(p[2]) - a0;
-        (a0 + da - TAU * (da / TAU).round()) * -0.159_154_94 + 0.5 + p[3] * 0.002_777_78
+        (a0 + da - TAU * (da / TAU).round()) * -0.5 * FRAC_1_PI + 0.5 + p[3] / 360.0
     };
-    let lat = |p: &[f64]| p[1].clamp(-1.0, 1.0).asin() * 0.318_309_89 + 0.5;
+    let lat = |p: &[f64]| p[1].clamp(-1.0, 1.0).asin() * FRAC_1_PI + 0.5;
     let mut tc = Filtered::zero(ValueType::Vector2);
     tc.ch[0] = crate::moments::nary(&xs, lon);
     tc.ch[1] = crate::moments::nary(&xs, lat);

@@ -1020,7 +1020,7 @@ fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
     match pat {
         Tiled::Cross { th, .. } if th <= 0.0 => return Moments::constant(0.0),
         Tiled::Shapes { size, motif: Motif::Hexagon, .. } if size <= 0.0 => return Moments::constant(0.0),
-        Tiled::Shapes { size, .. } if size == 0.0 => return Moments::constant(0.0),
+        Tiled::Shapes { size: 0.0, .. } => return Moments::constant(0.0),
         _ => {}
     }
     let (tile, off) = (v2(&ins[1]).as_dvec2(), v2(&ins[2]).as_dvec2());
