@@ -453,16 +453,6 @@ impl<'a, 'i> Importer<'a, 'i> {
         if !soft.is_empty() {
             return Err(Fail::Soft(soft));
         }
-        // Before 1.39 a switch had five inputs, the fifth taken from `which` ≥ 4 on; 1.39 has
-        // ten. Feeding the fifth's source to the new five keeps the old choice.
-        if category == "switch" && self.version(el) < (1, 39) {
-            let fifth = inputs.iter().find(|(n, _)| *n == "in5").map(|(_, s)| s.clone());
-            let fifth = fifth.unwrap_or_else(|| Source::Constant(Value::splat(ty, 0.0)));
-            for name in ["in6", "in7", "in8", "in9", "in10"] {
-                inputs.retain(|(n, _)| *n != name);
-                inputs.push((name, fifth.clone()));
-            }
-        }
         let id = match self.builder.add_node(q, category, ty, &inputs, params) {
             Ok(id) => id,
             Err(BuildError::UnsupportedType { .. }) => {

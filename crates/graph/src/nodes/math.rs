@@ -20,7 +20,7 @@
 //! | `dotproduct`, `magnitude`, `distance`, `normalize` | vectors | exact for a uniform operand of `dotproduct`; cubature otherwise |
 //! | `and`, `or`, `xor`, `not` | booleans `in1`, `in2` (false) / `in` (false) | a boolean's mean is the probability that it is true over the footprint; the operands are taken as independent: `p1 p2`, `p1 + p2 − p1 p2`, `p1 + p2 − 2 p1 p2`, `1 − p` (exact at points) |
 //! | `ifgreater`, `ifgreatereq`, `ifequal` | `value1` (1), `value2` (0), `in1` (0), `in2` (0) | `mix(in2, in1, P(value1 > value2))` with the probability from the difference's Gaussian; boolean variants output the probability itself |
-//! | `switch` | `in1` … `in10` (0), `which` (0; float or integer) | at a point, `in1` for `which < 1`, `in2` for `which < 2`, …, `in10` otherwise (MaterialX's code generators); over a footprint, the mixture `Σ P_k in_k` with `P_k` the Gaussian mass of `which` in the k-th interval, and the mixture's variance |
+//! | `switch` | `in1` … `in10` (0), `which` (0; float or integer) | at a point, `in1` for `which < 1`, `in2` for `which < 2`, …, `in10` for `which < 10`, 0 from 10 on (MaterialX's `NG_switch`); over a footprint, the mixture `Σ P_k in_k` with `P_k` the Gaussian mass of `which` in the k-th interval, and the mixture's variance |
 //!
 //! Cubature and Hermite rules treat channels as Gaussian and independent; at Σ = 0 every rule
 //! reduces to the plain function of the inputs. Division by zero (`divide`, `modulo`, `remap`
@@ -656,19 +656,22 @@ fn condition(op: MathOp, v1: Moments, v2: Moments, fp: &Footprint, integral: boo
     }
 }
 
-/// `switch`: input `k` (0-based) is chosen on `k ≤ which < k + 1`, the first below 1 and the
-/// last from 9 on. Over a footprint, `which ~ N(m, s²)` picks input `k` with the Gaussian mass
-/// `P_k` of its interval, so the result is the mixture `Σ P_k in_k` (`which` taken independent
-/// of the inputs): its mean, its variance `Σ P_k (σ_k² + μ_k²) − mean²`, and its gradient
-/// `Σ P_k ∇μ_k + μ_k ∇P_k`. At a point (`s` = 0) it is the plain pick.
+/// `switch`: input `k` (0-based) is chosen on `k ≤ which < k + 1`, the first below 1, and
+/// from 10 on (or for a NaN) none: 0, as MaterialX's `NG_switch` chain of `ifgreater`s has it.
+/// Over a footprint, `which ~ N(m, s²)` picks input `k` with the Gaussian mass `P_k` of its
+/// interval, so the result is the mixture `Σ P_k in_k` (`which` taken independent of the
+/// inputs; the mass from 10 on adds 0): its mean, its variance `Σ P_k (σ_k² + μ_k²) − mean²`,
+/// and its gradient `Σ P_k ∇μ_k + μ_k ∇P_k`. At a point (`s` = 0) it is the plain pick.
 fn switch(which: Moments, ins: &[Filtered], ty: ValueType, out: &mut Filtered) {
-    let last = ins.len() - 1;
     let (m, s) = (which.mean as f64, which.sigma() as f64);
     if s == 0.0 {
-        // NaN picks the last input, as the generated `if (which < k)` chain does.
-        let k = (0..last).find(|&k| m < (k + 1) as f64).unwrap_or(last);
-        for c in 0..ty.channels() {
-            out.ch[c] = ins[k].at(c);
+        match (0..ins.len()).find(|&k| m < (k + 1) as f64) {
+            Some(k) => {
+                for c in 0..ty.channels() {
+                    out.ch[c] = ins[k].at(c);
+                }
+            }
+            None => *out = Filtered::zero(ty),
         }
         return;
     }
@@ -677,12 +680,8 @@ fn switch(which: Moments, ins: &[Filtered], ty: ValueType, out: &mut Filtered) {
     let mut grad = [Vec2::ZERO; 4];
     let mut below = (0.0, 0.0); // (Φ, φ) at the interval's lower edge
     for (k, input) in ins.iter().enumerate() {
-        let above = if k == last {
-            (1.0, 0.0)
-        } else {
-            let z = ((k + 1) as f64 - m) / s;
-            (gaussian::cdf(z), gaussian::pdf(z))
-        };
+        let z = ((k + 1) as f64 - m) / s;
+        let above = (gaussian::cdf(z), gaussian::pdf(z));
         let p = (above.0 - below.0).max(0.0);
         // dP/dm = (φ(z_lo) − φ(z_hi)) / s.
         let dp = (below.1 - above.1) / s;

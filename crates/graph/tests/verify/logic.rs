@@ -107,11 +107,14 @@ fn switch_doc(version: &str, n_inputs: usize, which_type: &str) -> Document {
     Document::parse(&text, "switch.mtlx".as_ref(), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// The unfiltered switch: input k (1-based) for `which < k`, the last otherwise; `count`
-/// inputs as written (1.38: five; 1.39: ten).
+/// The unfiltered switch as MaterialX 1.39.5 renders it (its `NG_switch`, and its own bakes):
+/// input k (1-based) for `which < k` up to 10, 0 from 10 on; `count` inputs as written (1.38:
+/// five, the five 1.39 added reading their default 0).
 fn switch_pick(which: f64, count: usize) -> f64 {
-    let k = (1..count).find(|&k| which < k as f64).unwrap_or(count);
-    (k * k) as f64 * 0.1
+    match (1..=10).find(|&k| which < k as f64) {
+        Some(k) if k <= count => (k * k) as f64 * 0.1,
+        _ => 0.0,
+    }
 }
 
 #[test]
