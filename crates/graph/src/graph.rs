@@ -192,10 +192,13 @@ impl Graph {
     /// `geompropvalue` giving its default, a second uv set read as the first), each naming
     /// its node.
     pub fn warnings(&self) -> Vec<String> {
-        self.nodes
-            .iter()
-            .filter_map(|n| nodes::warning(&n.op).map(|w| format!("node `{}` ({}): {w}", n.name, n.category)))
-            .collect()
+        (0..self.nodes.len() as u32).filter_map(|k| self.node_warning(NodeId(k))).collect()
+    }
+
+    /// The load warning of node `id`, if any, naming the node.
+    pub fn node_warning(&self, id: NodeId) -> Option<String> {
+        let n = &self.nodes[id.0 as usize];
+        nodes::warning(&n.op).map(|w| format!("node `{}` ({}): {w}", n.name, n.category))
     }
 }
 

@@ -956,7 +956,7 @@ impl Builder {
             graph::Document::load_with(&path, &self.mtlx)
         }
         .map_err(|e| obj.error_at("filename", format!("in MaterialX document: {e}")))?;
-        for w in doc.graph().warnings() {
+        for w in doc.warnings() {
             eprintln!("warning: {}: {w}", path.display());
         }
         // Nodes that cannot be evaluated fail only what needs them: here a warning names each,

@@ -105,7 +105,7 @@ impl BakeJob {
             rayon::ThreadPoolBuilder::new().num_threads(threads).build().context("cannot start worker threads")?;
         let t = Instant::now();
         let image = pool.install(|| bake::bake(doc.graph(), &source, ty, &settings))?;
-        Ok(Baked { image, ty, threads, seconds: t.elapsed().as_secs_f64(), warnings: doc.graph().warnings() })
+        Ok(Baked { image, ty, threads, seconds: t.elapsed().as_secs_f64(), warnings: doc.warnings() })
     }
 }
 

@@ -116,6 +116,8 @@ impl<'a, 'i> Importer<'a, 'i> {
                         }
                         Ok(None) => Err("unconnected".to_string()),
                         Err(Fail::Soft(ix)) => Err(self.reason(&ix)),
+                        // Leniently, scoped to the shader input (see `scoped`).
+                        Err(Fail::Hard(e)) if self.opts.lenient && scoped(&e.kind) => Err(e.to_string()),
                         Err(Fail::Hard(e)) => return Err(e),
                     };
                     ShaderInput::Output(res)
@@ -126,15 +128,17 @@ impl<'a, 'i> Importer<'a, 'i> {
                             return Err(self.err(inp, LoadErrorKind::Structure("<input> has no type attribute".into())))
                         }
                     };
-                    let v = match (ty, inp.attribute("value")) {
+                    match (ty, inp.attribute("value")) {
                         (Some(t), Some(text)) => match self.typed_value(inp, t, text) {
-                            Ok(v) => Some(v),
+                            Ok(v) => ShaderInput::Value(Some(v)),
+                            Err(Fail::Hard(e)) if self.opts.lenient && scoped(&e.kind) => {
+                                ShaderInput::Output(Err(e.to_string()))
+                            }
                             Err(Fail::Hard(e)) => return Err(e),
-                            Err(Fail::Soft(_)) => None,
+                            Err(Fail::Soft(_)) => ShaderInput::Value(None),
                         },
-                        _ => None,
-                    };
-                    ShaderInput::Value(v)
+                        _ => ShaderInput::Value(None),
+                    }
                 };
                 inputs.push((iname, si));
             }

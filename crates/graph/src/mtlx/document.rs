@@ -50,6 +50,9 @@ pub struct Document {
     unsupported: Vec<Unsupported>,
     /// Outputs made for connected shader inputs (`shader.input`).
     shader_outputs: HashSet<String>,
+    /// The node graphs that implement nodedefs: their own nodes are built once at the
+    /// nodedef's defaults only to check them, so their warnings are not the document's.
+    definition_graphs: Vec<String>,
 }
 
 impl Document {
@@ -90,6 +93,7 @@ impl Document {
                 kind: LoadErrorKind::Unsupported { items, supported: nodes::supported_list() },
             });
         }
+        let definition_graphs = imp.definition_graphs();
         let Importer { builder, shaders, materials, skipped, unsupported, shader_outputs, .. } = imp;
         Ok(Document {
             path: path.to_path_buf(),
@@ -100,7 +104,27 @@ impl Document {
             skipped,
             unsupported,
             shader_outputs,
+            definition_graphs,
         })
+    }
+
+    /// Load warnings about the document's nodes (a node that gives its default, a property
+    /// tessera does not carry): the graph's, less those of the nodes of node graphs that
+    /// implement nodedefs, which are built at the nodedef's defaults only to be checked (an
+    /// included library's image nodes with empty files would otherwise warn by the dozen).
+    /// Instances of those nodedefs, named after the node that uses them, still warn.
+    pub fn warnings(&self) -> Vec<String> {
+        let g = &self.graph;
+        g.node_ids()
+            .filter(|id| {
+                let name = g.node_name(*id);
+                !self
+                    .definition_graphs
+                    .iter()
+                    .any(|d| name.strip_prefix(d.as_str()).is_some_and(|r| r.starts_with('/')))
+            })
+            .filter_map(|id| g.node_warning(id))
+            .collect()
     }
 
     /// The file this was loaded from.

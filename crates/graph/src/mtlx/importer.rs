@@ -267,6 +267,16 @@ impl<'a, 'i> Importer<'a, 'i> {
         Fail::Soft(vec![k])
     }
 
+    /// The names of the node graphs that implement nodedefs (scopes of `Iface::Def` without an
+    /// instance: the copies checked at the defaults).
+    pub(super) fn definition_graphs(&self) -> Vec<String> {
+        self.scopes
+            .iter()
+            .filter(|s| matches!(s.iface, Iface::Def { instance: None, .. }) && s.parent.is_none())
+            .map(|s| s.prefix.clone())
+            .collect()
+    }
+
     /// Records node `node` as broken by `e` (scoped, as an unsupported node is): its entry.
     pub(super) fn broken(&mut self, category: &str, node: &str, e: LoadError) -> usize {
         self.unsupported.push(Unsupported {

@@ -285,3 +285,44 @@ fn node_errors_are_scoped_in_lenient_loads() {
     let e = Document::parse(cycle, path, &opts).expect_err("a cycle is an error of the document");
     assert!(matches!(e.kind, LoadErrorKind::Cycle(_)), "{e}");
 }
+
+/// A library whose shader implementation graphs connect to nodes tessera does not keep (BSDF
+/// nodes, as MaterialX's `usd_preview_surface.mtlx` has) loads leniently: the broken shader
+/// input is scoped to that shader, and the library's texture nodedefs serve the document,
+/// without the warnings of its implementation graphs' own nodes.
+#[test]
+fn libraries_with_unusable_shader_graphs_still_serve_their_nodes() {
+    use graph::{Document, LoadOptions};
+    let text = r#"<?xml version="1.0"?>
+<materialx version="1.39">
+  <nodedef name="ND_my_shader" node="my_shader"><input name="c" type="color3" value="1, 1, 1"/><output name="out" type="surfaceshader"/></nodedef>
+  <nodegraph name="IMP_my_shader" nodedef="ND_my_shader">
+    <oren_nayar_diffuse_bsdf name="diffuse" type="BSDF"><input name="color" type="color3" interfacename="c"/></oren_nayar_diffuse_bsdf>
+    <mix name="blend" type="BSDF"><input name="fg" type="BSDF" nodename="diffuse"/><input name="bg" type="BSDF" nodename="missing"/></mix>
+    <surface name="surf" type="surfaceshader"><input name="bsdf" type="BSDF" nodename="blend"/></surface>
+    <output name="out" type="surfaceshader" nodename="surf"/>
+  </nodegraph>
+  <nodedef name="ND_my_tex" node="my_tex"><input name="scale" type="float" value="2"/><output name="out" type="float"/></nodedef>
+  <nodegraph name="IMP_my_tex" nodedef="ND_my_tex">
+    <texcoord name="t" type="vector2"/>
+    <extract name="u" type="float"><input name="in" type="vector2" nodename="t"/><input name="index" type="integer" value="0"/></extract>
+    <multiply name="m" type="float"><input name="in1" type="float" nodename="u"/><input name="in2" type="float" interfacename="scale"/></multiply>
+    <image name="unused" type="float"><input name="file" type="filename" value=""/></image>
+    <output name="out" type="float" nodename="m"/>
+  </nodegraph>
+  <nodegraph name="g">
+    <my_tex name="x" type="float"><input name="scale" type="float" value="3"/></my_tex>
+    <output name="out" type="float" nodename="x"/>
+  </nodegraph>
+</materialx>"#;
+    let opts = LoadOptions { lenient: true, ..LoadOptions::default() };
+    let d = Document::parse(text, std::path::Path::new("lib.mtlx"), &opts).unwrap_or_else(|e| panic!("{e}"));
+    let g = d.graph();
+    let out = g.output_id("g/out").expect("the texture node loads");
+    let mut scratch = graph::EvalScratch::new(g);
+    let v = g.eval_output(out, &graph::Footprint::point(glam::Vec2::new(0.25, 0.5)), &mut scratch).ch[0].mean;
+    assert!((v - 0.75).abs() < 1e-6, "{v}");
+    // The definition graph's own nodes, checked at the defaults, do not warn as the document's.
+    assert!(d.graph().warnings().iter().any(|w| w.contains("IMP_my_tex/unused")));
+    assert!(!d.warnings().iter().any(|w| w.contains("IMP_my_tex")), "{:?}", d.warnings());
+}

@@ -28,13 +28,18 @@ fn doc(version: &str, body: &str) -> String {
 
 /// Output `name` of `doc` evaluated unfiltered at `uv`.
 fn eval(doc: &Document, name: &str, uv: Vec2) -> Vec<f32> {
+    eval_at(doc, name, &Footprint::point(uv))
+}
+
+/// The filtered mean of output `name` of `doc` over footprint `fp`, per channel.
+fn eval_at(doc: &Document, name: &str, fp: &Footprint) -> Vec<f32> {
     let g = doc.graph();
     let out = g.output_id(name).unwrap_or_else(|| {
         let names: Vec<&str> = g.outputs().iter().map(|o| o.name.as_str()).collect();
         panic!("no output {name}; have {names:?}; skipped {:?}", doc.skipped())
     });
     let mut scratch = EvalScratch::new(g);
-    let v = g.eval_output(out, &Footprint::point(uv), &mut scratch);
+    let v = g.eval_output(out, fp, &mut scratch);
     (0..g.output(out).ty.channels()).map(|k| v.ch[k].mean).collect()
 }
 
@@ -871,12 +876,7 @@ fn composed_nodes_equal_their_definitions() {
         Document::parse(&text, Path::new("composed.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
     let w = d.graph().warnings();
     assert!(w.iter().any(|w| w.contains("`g/bl`") && w.contains("unblurred")), "{w:?}");
-    let g = d.graph();
-    let mut scratch = EvalScratch::new(g);
-    let mut at = |name: &str, fp: &Footprint| {
-        let v = g.eval_output(g.output_id(name).unwrap(), fp, &mut scratch);
-        v.ch[..v.n()].iter().map(|m| m.mean).collect::<Vec<f32>>()
-    };
+    let at = |name: &str, fp: &Footprint| eval_at(&d, name, fp);
     for uv in [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.9, 0.44), Vec2::new(0.31, 0.27)] {
         for fp in [Footprint::point(uv), Footprint::isotropic(uv, 0.004), Footprint::isotropic(uv, 0.05)] {
             for (node, graph, tol) in [
@@ -943,12 +943,7 @@ fn latlong_and_triplanar_images() {
         ),
     );
     let d = Document::parse(&text, Path::new("images.mtlx"), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
-    let g = d.graph();
-    let mut scratch = EvalScratch::new(g);
-    let mut at = |name: &str, fp: &Footprint| {
-        let v = g.eval_output(g.output_id(name).unwrap(), fp, &mut scratch);
-        v.ch[..v.n()].iter().map(|m| m.mean).collect::<Vec<f32>>()
-    };
+    let at = |name: &str, fp: &Footprint| eval_at(&d, name, fp);
     // The seam (d.x = 0 behind the viewer) runs along u = 0.5 for v < 0.5.
     for uv in
         [Vec2::new(0.13, 0.71), Vec2::new(0.52, 0.08), Vec2::new(0.5, 0.2), Vec2::new(0.31, 0.27), Vec2::new(0.77, 0.9)]
