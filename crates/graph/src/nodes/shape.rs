@@ -255,8 +255,9 @@ fn tiled_point(q: Vec2, size: f32, staggered: bool, motif: Motif) -> f32 {
         let rc = Vec2::new(fmod(q.x, 1.0), fmod(q.y, 1.0)) * 2.0 - 1.0;
         return motif.point(rc, size);
     }
-    let (row, period) = if motif == Motif::Clover { (0.5, 1.0) } else { (ROW, 1.73205) };
-    let dx = if fmod(q.y, period) > row { 0.5 } else { 0.0 };
+    // Odd rows (of two per period) are shifted by half a cell.
+    let row = motif.row();
+    let dx = if fmod(q.y, 2.0 * row) > row { 0.5 } else { 0.0 };
     let mx = fmod(q.x + dx, 1.0);
     let my = fmod(q.y, row);
     let h = size / 2.0;
@@ -460,30 +461,28 @@ fn gauss_legendre_short() -> &'static [(f64, f64); GL_SHORT] {
 /// The `N`-point Gauss–Legendre nodes and weights, by Newton's method on the Legendre
 /// polynomial.
 fn legendre_rule<const N: usize>() -> [(f64, f64); N] {
-    {
-        let n = N;
-        let mut out = [(0.0, 0.0); N];
-        for i in 0..n {
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-15 {
-                    break;
-                }
+    let n = N;
+    let mut out = [(0.0, 0.0); N];
+    for i in 0..n {
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
             }
-            out[i] = (x, 2.0 / ((1.0 - x * x) * dp * dp));
+            dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            let dx = p1 / dp;
+            x -= dx;
+            if dx.abs() < 1e-15 {
+                break;
+            }
         }
-        out
+        out[i] = (x, 2.0 / ((1.0 - x * x) * dp * dp));
     }
+    out
 }
 
 /// Φ-mass of `(lo, hi)` under `N(m, s²)` and its derivative in `m`.
@@ -579,25 +578,25 @@ fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
         let ch = &mut ch[..n];
         ch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         let (mut q, mut dq) = (0.0, 0.0);
+        // A merged interval's mass (none beyond 9σ, where it is below 1e-19).
+        let mut add = |(a, b): (f64, f64)| {
+            if b > mo - 9.0 * so && a < mo + 9.0 * so {
+                let (p, d) = interval(a, b, mo, so);
+                q += p;
+                dq += d;
+            }
+        };
         let mut cur: Option<(f64, f64)> = None;
         for &(lo, hi) in ch.iter() {
             match cur {
                 Some((a, b)) if lo <= b => cur = Some((a, b.max(hi))),
                 _ => {
-                    if let Some((a, b)) = cur.filter(|(a, b)| *b > mo - 9.0 * so && *a < mo + 9.0 * so) {
-                        let (p, d) = interval(a, b, mo, so);
-                        q += p;
-                        dq += d;
-                    }
+                    cur.map(&mut add);
                     cur = Some((lo, hi));
                 }
             }
         }
-        if let Some((a, b)) = cur {
-            let (p, d) = interval(a, b, mo, so);
-            q += p;
-            dq += d;
-        }
+        cur.map(&mut add);
         (q, dq)
     };
     let mut g = [0.0f64; 2];
@@ -872,29 +871,36 @@ impl Series {
     }
 }
 
+/// A per-thread memo of what a few patterns take long to make: the last few entries, oldest
+/// first.
+type Memo<K, V> = std::cell::RefCell<Vec<(K, V)>>;
+
+/// Hands `f` the value remembered for `key` in `memo`, made by `make` (and remembered, the
+/// oldest of four entries giving way) when absent.
+fn remembered<K: PartialEq, V, R>(memo: &Memo<K, V>, key: K, make: impl FnOnce() -> V, f: impl FnOnce(&V) -> R) -> R {
+    let mut memo = memo.borrow_mut();
+    if let Some(k) = memo.iter().position(|(p, _)| *p == key) {
+        return f(&memo[k].1);
+    }
+    let v = make();
+    let r = f(&v);
+    if memo.len() == 4 {
+        memo.remove(0);
+    }
+    memo.push((key, v));
+    r
+}
+
 /// Bins of a [`Tiled::profile`] over its period.
 const PROFILE_BINS: usize = 256;
 
 impl Tiled {
     /// The pattern's [`Series`], handed to `f`; remembered per thread for the last few patterns.
     fn series<R>(&self, f: impl FnOnce(&Series) -> R) -> R {
-        type Memo = Vec<((u8, u64), Series)>;
         thread_local! {
-            static MEMO: std::cell::RefCell<Memo> = const { std::cell::RefCell::new(Vec::new()) };
+            static MEMO: Memo<(u8, u64), Series> = const { std::cell::RefCell::new(Vec::new()) };
         }
-        let key = self.key();
-        MEMO.with_borrow_mut(|memo| {
-            if let Some(k) = memo.iter().position(|(p, _)| *p == key) {
-                return f(&memo[k].1);
-            }
-            let series = self.make_series();
-            let r = f(&series);
-            if memo.len() == 4 {
-                memo.remove(0);
-            }
-            memo.push((key, series));
-            r
-        })
+        MEMO.with(|memo| remembered(memo, self.key(), || self.make_series(), f))
     }
 
     fn make_series(&self) -> Series {
@@ -954,39 +960,32 @@ impl Tiled {
     /// the last few patterns, as the [`Series`]: the 65 536 point evaluations it takes are
     /// paid once.
     fn profile(&self, axis: usize, f: impl FnOnce(&[f32; PROFILE_BINS]) -> (f64, f64)) -> (f64, f64) {
-        type Memo = Vec<((u8, u64), usize, Box<[f32; PROFILE_BINS]>)>;
         thread_local! {
-            static MEMO: std::cell::RefCell<Memo> = const { std::cell::RefCell::new(Vec::new()) };
+            static MEMO: Memo<((u8, u64), usize), Box<[f32; PROFILE_BINS]>> =
+                const { std::cell::RefCell::new(Vec::new()) };
         }
-        let key = self.key();
-        MEMO.with_borrow_mut(|memo| {
-            if let Some(k) = memo.iter().position(|(p, a, _)| *p == key && *a == axis) {
-                return f(&memo[k].2);
+        MEMO.with(|memo| remembered(memo, (self.key(), axis), || self.make_profile(axis), |b| f(b)))
+    }
+
+    fn make_profile(&self, axis: usize) -> Box<[f32; PROFILE_BINS]> {
+        let periods = [2.0, self.row_height() * 2.0];
+        let n = PROFILE_BINS;
+        let mut bins = Box::new([0.0f32; PROFILE_BINS]);
+        for (b, v) in bins.iter_mut().enumerate() {
+            let mut acc = 0.0f64;
+            for a in 0..n {
+                let along = (b as f64 + 0.5) / n as f64 * periods[axis];
+                let across = (a as f64 + 0.5) / n as f64 * periods[1 - axis];
+                let q = if axis == 0 {
+                    Vec2::new(along as f32, across as f32)
+                } else {
+                    Vec2::new(across as f32, along as f32)
+                };
+                acc += self.point(q) as f64;
             }
-            let periods = [2.0, self.row_height() * 2.0];
-            let n = PROFILE_BINS;
-            let mut bins = Box::new([0.0f32; PROFILE_BINS]);
-            for (b, v) in bins.iter_mut().enumerate() {
-                let mut acc = 0.0f64;
-                for a in 0..n {
-                    let along = (b as f64 + 0.5) / n as f64 * periods[axis];
-                    let across = (a as f64 + 0.5) / n as f64 * periods[1 - axis];
-                    let q = if axis == 0 {
-                        Vec2::new(along as f32, across as f32)
-                    } else {
-                        Vec2::new(across as f32, along as f32)
-                    };
-                    acc += self.point(q) as f64;
-                }
-                *v = (acc / n as f64) as f32;
-            }
-            let r = f(&bins);
-            if memo.len() == 4 {
-                memo.remove(0);
-            }
-            memo.push((key, axis, bins));
-            r
-        })
+            *v = (acc / n as f64) as f32;
+        }
+        bins
     }
 }
 
