@@ -894,6 +894,9 @@ fn remembered<K: PartialEq, V, R>(memo: &Memo<K, V>, key: K, make: impl FnOnce()
 /// Bins of a [`Tiled::profile`] over its period.
 const PROFILE_BINS: usize = 256;
 
+/// A [`Tiled::profile`]'s bins.
+type Profile = Box<[f32; PROFILE_BINS]>;
+
 impl Tiled {
     /// The pattern's [`Series`], handed to `f`; remembered per thread for the last few patterns.
     fn series<R>(&self, f: impl FnOnce(&Series) -> R) -> R {
@@ -961,13 +964,12 @@ impl Tiled {
     /// paid once.
     fn profile(&self, axis: usize, f: impl FnOnce(&[f32; PROFILE_BINS]) -> (f64, f64)) -> (f64, f64) {
         thread_local! {
-            static MEMO: Memo<((u8, u64), usize), Box<[f32; PROFILE_BINS]>> =
-                const { std::cell::RefCell::new(Vec::new()) };
+            static MEMO: Memo<((u8, u64), usize), Profile> = const { std::cell::RefCell::new(Vec::new()) };
         }
         MEMO.with(|memo| remembered(memo, (self.key(), axis), || self.make_profile(axis), |b| f(b)))
     }
 
-    fn make_profile(&self, axis: usize) -> Box<[f32; PROFILE_BINS]> {
+    fn make_profile(&self, axis: usize) -> Profile {
         let periods = [2.0, self.row_height() * 2.0];
         let n = PROFILE_BINS;
         let mut bins = Box::new([0.0f32; PROFILE_BINS]);
