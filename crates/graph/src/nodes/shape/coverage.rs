@@ -1,0 +1,376 @@
+//! Convex pieces and their Gaussian coverage.
+
+use crate::gaussian::{cdf, pdf};
+use glam::DVec2;
+use std::sync::OnceLock;
+
+const SQRT3: f64 = 1.732_050_807_568_877_2;
+
+/// A convex primitive.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Prim {
+    Disk {
+        c: DVec2,
+        r: f64,
+    },
+    /// Regular hexagon of inradius `r`, flat sides at `x = c.x ± r`.
+    Hex {
+        c: DVec2,
+        r: f64,
+    },
+    /// Points within `r` of the segment `a–b`.
+    Capsule {
+        a: DVec2,
+        b: DVec2,
+        r: f64,
+    },
+    Rect {
+        lo: DVec2,
+        hi: DVec2,
+    },
+    /// `|n · p − c| < w`.
+    Strip {
+        n: DVec2,
+        c: f64,
+        w: f64,
+    },
+}
+
+const EMPTY: (f64, f64) = (f64::INFINITY, f64::NEG_INFINITY);
+
+#[inline]
+pub(super) fn get(p: DVec2, k: usize) -> f64 {
+    if k == 0 {
+        p.x
+    } else {
+        p.y
+    }
+}
+
+impl Prim {
+    /// The chord at coordinate `k = t` along the other axis.
+    fn chord(&self, k: usize, t: f64) -> (f64, f64) {
+        let o = 1 - k;
+        match *self {
+            Prim::Disk { c, r } => {
+                let d = t - get(c, k);
+                if d.abs() >= r {
+                    return EMPTY;
+                }
+                let h = (r * r - d * d).sqrt();
+                (get(c, o) - h, get(c, o) + h)
+            }
+            Prim::Hex { c, r } => {
+                let big = 2.0 * r / SQRT3;
+                let d = (t - get(c, k)).abs();
+                let h = if k == 0 {
+                    if d >= r {
+                        return EMPTY;
+                    }
+                    big - d / SQRT3
+                } else {
+                    if d >= big {
+                        return EMPTY;
+                    }
+                    if d <= big / 2.0 {
+                        r
+                    } else {
+                        (big - d) * SQRT3
+                    }
+                };
+                (get(c, o) - h, get(c, o) + h)
+            }
+            Prim::Capsule { a, b, r } => {
+                let ab = b - a;
+                let len = ab.length();
+                let mut lo = f64::INFINITY;
+                let mut hi = f64::NEG_INFINITY;
+                let mut add = |(l, h): (f64, f64)| {
+                    if l < h {
+                        lo = lo.min(l);
+                        hi = hi.max(h);
+                    }
+                };
+                add(Prim::Disk { c: a, r }.chord(k, t));
+                add(Prim::Disk { c: b, r }.chord(k, t));
+                if len > 0.0 {
+                    let dir = ab / len;
+                    let perp = DVec2::new(-dir.y, dir.x);
+                    let s1 = Prim::Strip { n: perp, c: perp.dot(a), w: r }.chord(k, t);
+                    let s2 = Prim::Strip { n: dir, c: dir.dot((a + b) * 0.5), w: len * 0.5 }.chord(k, t);
+                    add((s1.0.max(s2.0), s1.1.min(s2.1)));
+                }
+                (lo, hi)
+            }
+            Prim::Rect { lo, hi } => {
+                if t < get(lo, k) || t >= get(hi, k) {
+                    return EMPTY;
+                }
+                (get(lo, o), get(hi, o))
+            }
+            Prim::Strip { n, c, w } => {
+                let (nk, no) = (get(n, k), get(n, o));
+                if no.abs() < 1e-12 {
+                    return if (nk * t - c).abs() < w { (f64::NEG_INFINITY, f64::INFINITY) } else { EMPTY };
+                }
+                let a = (c - w - nk * t) / no;
+                let b = (c + w - nk * t) / no;
+                (a.min(b), a.max(b))
+            }
+        }
+    }
+
+    /// Extent along axis `k`.
+    fn extent(&self, k: usize) -> (f64, f64) {
+        match *self {
+            Prim::Disk { c, r } => (get(c, k) - r, get(c, k) + r),
+            Prim::Hex { c, r } => {
+                let e = if k == 0 { r } else { 2.0 * r / SQRT3 };
+                (get(c, k) - e, get(c, k) + e)
+            }
+            Prim::Capsule { a, b, r } => (get(a, k).min(get(b, k)) - r, get(a, k).max(get(b, k)) + r),
+            Prim::Rect { lo, hi } => (get(lo, k), get(hi, k)),
+            Prim::Strip { .. } => (f64::NEG_INFINITY, f64::INFINITY),
+        }
+    }
+}
+
+/// A convex piece: the intersection of up to three primitives, counted with a sign.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Piece {
+    pub(super) prims: [Option<Prim>; 3],
+    pub(super) sign: f64,
+}
+
+impl Piece {
+    pub(super) fn one(p: Prim) -> Piece {
+        Piece { prims: [Some(p), None, None], sign: 1.0 }
+    }
+    pub(super) fn clipped(p: Prim, r: Prim) -> Piece {
+        Piece { prims: [Some(p), Some(r), None], sign: 1.0 }
+    }
+    /// The cloverleaf around `c` of leaves of radius `r` (≥ 0) centred `r` from `c` along
+    /// each axis, clipped to `clip`: its four disks, which overlap, for [`union_coverage`].
+    pub(super) fn clover(c: DVec2, r: f64, clip: Option<Prim>, out: &mut Vec<Piece>) {
+        for d in [DVec2::X, DVec2::Y, -DVec2::X, -DVec2::Y] {
+            out.push(Piece { prims: [Some(Prim::Disk { c: c + d * r, r }), clip, None], sign: 1.0 });
+        }
+    }
+    fn chord(&self, k: usize, t: f64) -> (f64, f64) {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for p in self.prims.iter().flatten() {
+            let (a, b) = p.chord(k, t);
+            lo = lo.max(a);
+            hi = hi.min(b);
+        }
+        (lo, hi)
+    }
+    fn extent(&self, k: usize) -> (f64, f64) {
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for p in self.prims.iter().flatten() {
+            let (a, b) = p.extent(k);
+            lo = lo.max(a);
+            hi = hi.min(b);
+        }
+        (lo, hi)
+    }
+}
+
+const GL_N: usize = 20;
+/// The shorter rule [`union_coverage`] uses on each of several spans.
+const GL_SHORT: usize = 8;
+
+/// Gauss–Legendre nodes and weights on [−1, 1].
+fn gauss_legendre() -> &'static [(f64, f64); GL_N] {
+    static R: OnceLock<[(f64, f64); GL_N]> = OnceLock::new();
+    R.get_or_init(legendre_rule)
+}
+
+/// The 8-point Gauss–Legendre rule on [−1, 1].
+fn gauss_legendre_short() -> &'static [(f64, f64); GL_SHORT] {
+    static R: OnceLock<[(f64, f64); GL_SHORT]> = OnceLock::new();
+    R.get_or_init(legendre_rule)
+}
+
+/// The `N`-point Gauss–Legendre nodes and weights, by Newton's method on the Legendre
+/// polynomial.
+fn legendre_rule<const N: usize>() -> [(f64, f64); N] {
+    let n = N;
+    let mut out = [(0.0, 0.0); N];
+    for i in 0..n {
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            let dx = p1 / dp;
+            x -= dx;
+            if dx.abs() < 1e-15 {
+                break;
+            }
+        }
+        out[i] = (x, 2.0 / ((1.0 - x * x) * dp * dp));
+    }
+    out
+}
+
+/// Φ-mass of `(lo, hi)` under `N(m, s²)` and its derivative in `m`.
+#[inline]
+pub(super) fn interval(lo: f64, hi: f64, m: f64, s: f64) -> (f64, f64) {
+    if lo >= hi {
+        return (0.0, 0.0);
+    }
+    let (a, b) = ((lo - m) / s, (hi - m) / s);
+    let p = if a > 0.0 { cdf(-a) - cdf(-b) } else { cdf(b) - cdf(a) };
+    (p.max(0.0), (pdf(a) - pdf(b)) / s)
+}
+
+/// Coverage of the signed pieces under `N(m, diag(s²))`: `(P, ∂P/∂m)`.
+pub(super) fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    // Integrate over the narrower axis k; closed form along the other.
+    let k = if s.x <= s.y { 0 } else { 1 };
+    let o = 1 - k;
+    let (mk, sk) = (get(m, k), get(s, k));
+    let (mo, so) = (get(m, o), get(s, o).max(1e-12));
+    let mut p = 0.0;
+    let mut g = [0.0f64; 2];
+    for pc in pieces {
+        if sk <= 0.0 {
+            let (q, dq) = interval(pc.chord(k, mk).0, pc.chord(k, mk).1, mo, so);
+            p += pc.sign * q;
+            g[o] += pc.sign * dq;
+            continue;
+        }
+        let (e0, e1) = pc.extent(k);
+        let (a, b) = (e0.max(mk - 6.0 * sk), e1.min(mk + 6.0 * sk));
+        if a >= b {
+            continue;
+        }
+        let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
+        for &(x, w) in gauss_legendre() {
+            let t = mid + half * x;
+            let z = (t - mk) / sk;
+            let wt = w * half * pdf(z) / sk;
+            let (lo, hi) = pc.chord(k, t);
+            let (q, dq) = interval(lo, hi, mo, so);
+            p += pc.sign * wt * q;
+            g[o] += pc.sign * wt * dq;
+            g[k] += pc.sign * wt * q * z / sk;
+        }
+    }
+    (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))
+}
+
+/// The most pieces [`union_coverage`] takes (three clipped cloverleafs).
+const MAX_UNION: usize = 12;
+
+/// Coverage of the union of (possibly overlapping) pieces under `N(m, diag(s²))`, as
+/// [`coverage`] but with the chords of all pieces at each height merged into disjoint
+/// intervals first: a union with no inclusion–exclusion terms to find. The narrower axis is
+/// integrated piecewise between the pieces' extents (Gauss–Legendre on each span: 20 points
+/// for up to two spans, 8 for more), only the pieces whose box meets the footprint's taken,
+/// so that each span sees chords that begin and end only at its ends.
+pub(super) fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    debug_assert!(pieces.len() <= MAX_UNION && pieces.iter().all(|p| p.sign == 1.0));
+    let k = if s.x <= s.y { 0 } else { 1 };
+    let o = 1 - k;
+    let (mk, sk) = (get(m, k), get(s, k));
+    let (mo, so) = (get(m, o), get(s, o).max(1e-12));
+    // Only the pieces whose box meets the footprint's (±7σ) count.
+    let mut near = [pieces[0]; MAX_UNION];
+    let mut n = 0;
+    for pc in pieces.iter().take(MAX_UNION) {
+        let meets = |axis: usize, c: f64, r: f64| {
+            let (a, b) = pc.extent(axis);
+            a < c + 7.0 * r && b > c - 7.0 * r
+        };
+        if meets(k, mk, sk) && meets(o, mo, so) {
+            near[n] = *pc;
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return (0.0, DVec2::ZERO);
+    }
+    let pieces = &near[..n];
+    // The mass of the union of the chords at height t, and its derivative in the centre.
+    let at = |t: f64| -> (f64, f64) {
+        let mut ch = [(0.0f64, 0.0f64); MAX_UNION];
+        let mut n = 0;
+        for pc in pieces {
+            let (lo, hi) = pc.chord(k, t);
+            if lo < hi {
+                ch[n] = (lo, hi);
+                n += 1;
+            }
+        }
+        let ch = &mut ch[..n];
+        ch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let (mut q, mut dq) = (0.0, 0.0);
+        // A merged interval's mass (none beyond 9σ, where it is below 1e-19).
+        let mut add = |(a, b): (f64, f64)| {
+            if b > mo - 9.0 * so && a < mo + 9.0 * so {
+                let (p, d) = interval(a, b, mo, so);
+                q += p;
+                dq += d;
+            }
+        };
+        let mut cur: Option<(f64, f64)> = None;
+        for &(lo, hi) in ch.iter() {
+            match cur {
+                Some((a, b)) if lo <= b => cur = Some((a, b.max(hi))),
+                _ => {
+                    cur.map(&mut add);
+                    cur = Some((lo, hi));
+                }
+            }
+        }
+        cur.map(&mut add);
+        (q, dq)
+    };
+    let mut g = [0.0f64; 2];
+    if sk <= 0.0 {
+        let (q, dq) = at(mk);
+        g[o] = dq;
+        return (q.clamp(0.0, 1.0), DVec2::new(g[0], g[1]));
+    }
+    // Breakpoints: the pieces' extents within ±6σ.
+    let (lo, hi) = (mk - 6.0 * sk, mk + 6.0 * sk);
+    let mut cuts = [0.0f64; 2 * MAX_UNION + 2];
+    let mut n = 0;
+    for pc in pieces {
+        let (e0, e1) = pc.extent(k);
+        for e in [e0, e1] {
+            cuts[n] = e.clamp(lo, hi);
+            n += 1;
+        }
+    }
+    let cuts = &mut cuts[..n];
+    cuts.sort_unstable_by(f64::total_cmp);
+    let spans = cuts.windows(2).filter(|w| w[1] > w[0]).count();
+    // One span takes the long rule; several share the work, the short rule on each.
+    let rule: &[(f64, f64)] = if spans <= 2 { gauss_legendre() } else { gauss_legendre_short() };
+    let mut p = 0.0;
+    for w in cuts.windows(2) {
+        let (a, b) = (w[0], w[1]);
+        if b - a <= 0.0 {
+            continue;
+        }
+        let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
+        for &(x, wt) in rule {
+            let t = mid + half * x;
+            let z = (t - mk) / sk;
+            let wt = wt * half * pdf(z) / sk;
+            let (q, dq) = at(t);
+            p += wt * q;
+            g[o] += wt * dq;
+            g[k] += wt * q * z / sk;
+        }
+    }
+    (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))
+}
