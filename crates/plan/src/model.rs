@@ -131,6 +131,8 @@ pub struct Prediction {
 struct LevelTaps {
     /// `(x, y, lower touches, upper touches)`.
     tiles: Vec<(i32, i32, u64, u64)>,
+    /// Of the touches, the lower and upper ones of per-pixel requests.
+    per_pixel: (u64, u64),
     /// Observed and extrapolated distinct tiles per variant (index 1 lower, 2 upper, 3 both).
     observed: [f64; 4],
     predicted: [f64; 4],
@@ -183,6 +185,9 @@ impl<'p> Model<'p> {
             t => t,
         };
         let tile_scale = target.samples as f64 / tile_samples as f64;
+        // Requests a pixel's samples share grow with the pixels: the target renders the
+        // profile's image, whose traced pixels each recorded one sample's tile reads.
+        let pixel_scale = f64::from(profile.render.width) * f64::from(profile.render.height) / tile_samples as f64;
         let max = profile.cache.max_level;
         let bins = usize::from(max) + 2;
         let streams = profile
@@ -191,19 +196,23 @@ impl<'p> Model<'p> {
             .map(|s| {
                 let mut requests = vec![0.0; bins];
                 for r in &s.requests {
-                    requests[bin(r.level)] += r.requests as f64 * scale;
+                    let shared = r.per_pixel as f64;
+                    requests[bin(r.level)] += (r.requests as f64 - shared) * scale + shared * pixel_scale;
                 }
                 let mut levels: Vec<LevelTaps> = (0..=max).map(|_| LevelTaps::default()).collect();
                 for lt in &s.tiles {
                     let l = &mut levels[usize::from(lt.level)];
                     l.tiles.extend(lt.tiles.iter().map(|t| (t[0] as i32, t[1] as i32, t[2] as u64, t[3] as u64)));
+                    l.per_pixel = (l.per_pixel.0 + lt.per_pixel[0], l.per_pixel.1 + lt.per_pixel[1]);
                 }
                 for l in &mut levels {
                     for v in 1..4u8 {
                         let counts = l.tiles.iter().map(|t| pick(v, t.2, t.3));
                         let n: u64 = counts.clone().sum();
                         l.observed[usize::from(v)] = counts.clone().filter(|&c| c > 0).count() as f64;
-                        l.predicted[usize::from(v)] = richness::extrapolate(counts, n as f64 * (tile_scale - 1.0));
+                        let shared = pick(v, l.per_pixel.0, l.per_pixel.1).min(n);
+                        let more = (n - shared) as f64 * (tile_scale - 1.0) + shared as f64 * (pixel_scale - 1.0);
+                        l.predicted[usize::from(v)] = richness::extrapolate(counts, more.max(0.0));
                     }
                 }
                 StreamData { graph: s.graph as usize, outputs: s.outputs.clone(), requests, levels }

@@ -199,6 +199,11 @@ pub struct LevelCount {
     pub level: i32,
     /// Requests whose footprint falls on that level.
     pub requests: u64,
+    /// Of them, the requests a pixel's camera samples share (their first hits' textures,
+    /// evaluated once per pixel and surface): they grow with the image's pixels, the others
+    /// with its samples.
+    #[serde(default)]
+    pub per_pixel: u64,
 }
 
 /// Tiles read at one level, each `[x, y, lower, upper]`: tile coordinates and how many lookups
@@ -210,6 +215,10 @@ pub struct LevelTiles {
     pub level: u8,
     /// `[x, y, lower touches, upper touches]`.
     pub tiles: Vec<[i64; 4]>,
+    /// Of all the level's lower and upper touches, those of requests a pixel's samples share
+    /// ([`LevelCount::per_pixel`]).
+    #[serde(default)]
+    pub per_pixel: [u64; 2],
 }
 
 fn bad(what: String) -> PlanError {
@@ -312,6 +321,12 @@ impl Profile {
             if s.requests.iter().try_fold(0u64, |n, r| n.checked_add(r.requests)).is_none() {
                 return Err(bad(format!("streams[{si}]: the requests add up to more than 2^64")));
             }
+            if let Some(r) = s.requests.iter().find(|r| r.per_pixel > r.requests) {
+                return Err(bad(format!(
+                    "streams[{si}]: {} per-pixel requests at level {} of only {} requests",
+                    r.per_pixel, r.level, r.requests
+                )));
+            }
             let mut touches = vec![0u64; usize::from(c.max_level) + 1];
             for lt in &s.tiles {
                 if let Some(t) = lt.tiles.iter().find(|t| t[2] < 0 || t[3] < 0) {
@@ -328,6 +343,14 @@ impl Profile {
                     .ok_or_else(|| {
                         bad(format!("streams[{si}]: the touch counts at level {} add up to more than 2^64", lt.level))
                     })?;
+                let lower: u64 = lt.tiles.iter().map(|t| t[2] as u64).sum();
+                let upper: u64 = lt.tiles.iter().map(|t| t[3] as u64).sum();
+                if lt.per_pixel[0] > lower || lt.per_pixel[1] > upper {
+                    return Err(bad(format!(
+                        "streams[{si}]: per-pixel touches {:?} at level {} exceed the level's ({lower}, {upper})",
+                        lt.per_pixel, lt.level
+                    )));
+                }
             }
         }
         Ok(())

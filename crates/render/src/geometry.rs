@@ -205,6 +205,13 @@ pub trait Intersector: Send + Sync {
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit>;
     /// True when anything blocks `ray` within its interval.
     fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool;
+    /// The closest hit along `ray` on shape `shape` alone, whatever lies in front of it. A
+    /// backend without it answers `None` (the renderer then evaluates first-hit textures per
+    /// sample).
+    fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
+        let _ = (shapes, ray, shape);
+        None
+    }
 }
 
 /// The acceleration structure over all primitives of a scene.
@@ -441,10 +448,10 @@ impl Accel {
             ShapeGeometry::Mesh { .. } => None,
         }
     }
-}
 
-impl Intersector for Accel {
-    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+    /// The closest hit along `ray`, on shape `only` alone if given.
+    #[inline]
+    fn closest(&self, shapes: &[Shape], ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
         if self.prims.is_empty() {
             return None;
         }
@@ -453,6 +460,9 @@ impl Intersector for Accel {
         let mut best_bary = Vec2::ZERO;
         let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
         let found = self.bvh.ray_traverse(bray, &mut hit, |r, id| {
+            if only.is_some_and(|s| self.prims[id].shape != s) {
+                return f32::INFINITY;
+            }
             match self.intersect_prim(shapes, id, o, d, ray.tmin, r.tmax) {
                 Some((t, bary)) => {
                     best_bary = bary;
@@ -467,6 +477,16 @@ impl Intersector for Accel {
         }
         let pr = self.prims[hit.primitive_id as usize];
         Some(PreliminaryHit { t: hit.t, shape: pr.shape, index: pr.index, bary: best_bary })
+    }
+}
+
+impl Intersector for Accel {
+    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        self.closest(shapes, ray, None)
+    }
+
+    fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
+        self.closest(shapes, ray, Some(shape))
     }
 
     fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {

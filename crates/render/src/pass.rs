@@ -50,6 +50,10 @@ pub struct RenderIdentity {
     pub filter_scale: String,
     /// Whether textures were replaced by their means.
     pub free_textures: bool,
+    /// Whether every camera sample evaluated its own first-hit textures (not its pixel's shared
+    /// ones).
+    #[serde(default)]
+    pub per_sample_textures: bool,
     /// The cached nodes and how they are cached (`none` when nothing is).
     pub cache: String,
     /// [`SUM_FRACTION_BITS`] of the sums.
@@ -435,6 +439,7 @@ fn identity_difference(a: &RenderIdentity, b: &RenderIdentity) -> Option<String>
         .or_else(|| pair("footprint estimator", a.footprint.clone(), b.footprint.clone()))
         .or_else(|| pair("filter scale", a.filter_scale.clone(), b.filter_scale.clone()))
         .or_else(|| pair("free textures", a.free_textures.to_string(), b.free_textures.to_string()))
+        .or_else(|| pair("per-sample textures", a.per_sample_textures.to_string(), b.per_sample_textures.to_string()))
         .or_else(|| pair("cached nodes", a.cache.clone(), b.cache.clone()))
         .or_else(|| pair("sum precision", a.sum_fraction_bits.to_string(), b.sum_fraction_bits.to_string()))
 }
@@ -461,6 +466,7 @@ pub fn identity(
             crate::integrator::FilterScale::Fixed(s) => format!("{s:?}"),
         },
         free_textures: settings.free_textures,
+        per_sample_textures: settings.per_sample_textures,
         cache,
         sum_fraction_bits: SUM_FRACTION_BITS,
     }

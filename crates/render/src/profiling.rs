@@ -55,6 +55,9 @@ pub struct ProfileOptions {
 struct StreamTap {
     requests: [u64; BINS],
     tiles: HashMap<TileRef, (u64, u64)>,
+    /// Of `requests`, those a pixel's samples share; and of the touches per level, theirs.
+    per_pixel: [u64; BINS],
+    per_pixel_touches: [(u64, u64); MAX_LEVEL as usize + 1],
 }
 
 /// The graph source of a profiling render (one per image bucket): it records each request's
@@ -66,6 +69,8 @@ pub struct Profiler {
     desc: TextureDesc,
     tile_size: u32,
     streams: Vec<StreamTap>,
+    /// The request under way is one a pixel's samples share.
+    shared: bool,
     calls: u64,
     eval_ns: u64,
     tap_ns: u64,
@@ -86,6 +91,7 @@ impl Profiler {
             desc: node_texture(1),
             tile_size: CacheConfig::default().tile_size,
             streams: vec![StreamTap::default(); streams],
+            shared: false,
             calls: 0,
             eval_ns: 0,
             tap_ns: 0,
@@ -116,10 +122,17 @@ impl GraphSource for Profiler {
         let b = if taps.level < 0.0 { 0 } else { (taps.lod as usize + 1).min(BINS - 1) };
         let st = &mut self.streams[request.stream as usize];
         st.requests[b] += 1;
+        st.per_pixel[b] += u64::from(self.shared);
         if b > 0 && !self.exact {
             st.tiles.entry(taps.lower).or_default().0 += 1;
             if let Some(u) = taps.upper {
                 st.tiles.entry(u).or_default().1 += 1;
+            }
+            if self.shared {
+                st.per_pixel_touches[usize::from(taps.lower.level)].0 += 1;
+                if let Some(u) = taps.upper {
+                    st.per_pixel_touches[usize::from(u.level)].1 += 1;
+                }
             }
         }
         scratch.set_bin(b);
@@ -133,6 +146,10 @@ impl GraphSource for Profiler {
         if let Some(t) = t_all {
             self.exact_eval_ns += t.elapsed().as_nanos() as u64;
         }
+    }
+
+    fn shared(&mut self, on: bool) {
+        self.shared = on;
     }
 
     /// A pixel's samples after its first are timed whole (warm samples), their requests timed
@@ -155,6 +172,12 @@ impl Profiler {
         for (a, b) in self.streams.iter_mut().zip(&o.streams) {
             for (x, y) in a.requests.iter_mut().zip(&b.requests) {
                 *x += y;
+            }
+            for (x, y) in a.per_pixel.iter_mut().zip(&b.per_pixel) {
+                *x += y;
+            }
+            for (x, y) in a.per_pixel_touches.iter_mut().zip(&b.per_pixel_touches) {
+                *x = (x.0 + y.0, x.1 + y.1);
             }
             for (k, v) in &b.tiles {
                 let e = a.tiles.entry(*k).or_default();
@@ -398,7 +421,7 @@ fn bin_level(b: usize) -> i32 {
 fn stream_of(st: &StreamTap, material: String, graph: u32, outputs: Vec<u32>) -> Stream {
     let requests = (0..BINS)
         .filter(|&b| st.requests[b] > 0)
-        .map(|b| LevelCount { level: bin_level(b), requests: st.requests[b] })
+        .map(|b| LevelCount { level: bin_level(b), requests: st.requests[b], per_pixel: st.per_pixel[b] })
         .collect();
     let mut by_level: Vec<Vec<[i64; 4]>> = vec![Vec::new(); MAX_LEVEL as usize + 1];
     for (k, &(lo, up)) in &st.tiles {
@@ -410,7 +433,8 @@ fn stream_of(st: &StreamTap, material: String, graph: u32, outputs: Vec<u32>) ->
         .filter(|(_, t)| !t.is_empty())
         .map(|(l, mut tiles)| {
             tiles.sort_unstable();
-            LevelTiles { level: l as u8, tiles }
+            let (lower, upper) = st.per_pixel_touches[l];
+            LevelTiles { level: l as u8, tiles, per_pixel: [lower, upper] }
         })
         .collect();
     Stream { material, graph, outputs, requests, tiles }

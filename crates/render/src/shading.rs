@@ -12,6 +12,7 @@
 //! request and neither the integrator nor this module knows the cache or the profiler.
 
 use crate::material::{Material, MaterialGraph, SceneGraph};
+use glam::{DMat2, DVec2};
 use graph::{EvalScratch, EvalStats, Filtered, Footprint, Graph, NoOverride};
 
 /// How a thread's graph requests are served (see the [module docs](self)).
@@ -38,6 +39,11 @@ pub trait GraphSource {
     /// The camera sample begun last has ended.
     #[inline]
     fn end_sample(&mut self) {}
+
+    /// The requests that follow (until called again with `false`) are ones a pixel's camera
+    /// samples share ([`TextureEvaluator::begin_pixel`]).
+    #[inline]
+    fn shared(&mut self, _on: bool) {}
 }
 
 /// Every node evaluated on every request (shade on hit).
@@ -127,8 +133,47 @@ pub struct TextureEvaluator<S> {
     scratches: Vec<EvalScratch>,
     outputs: Vec<Filtered>,
     tmp: Vec<Filtered>,
+    /// The current pixel's first-hit textures, shared by its samples.
+    first_hits: FirstHits,
+    /// Whether the last [`Self::evaluate`] met a non-finite graph value.
+    last_nonfinite: bool,
     /// How requests are served.
     pub source: S,
+}
+
+/// Most surfaces whose first-hit textures one pixel keeps; samples of a pixel whose camera rays
+/// meet more surfaces evaluate those per sample.
+const FIRST_HITS_KEPT: usize = 4;
+
+/// How far (in standard deviations of the pixel centre's footprint) a sample's own first-hit
+/// footprint centre may lie from the pixel centre's, and by what fraction of its size the
+/// covariance may differ, for the sample to read the pixel's textures. A sample's own footprint
+/// is the pixel centre's extrapolated along the tangent plane at the sample's hit, exact on a
+/// plane (the two agree to rounding) and off by the curvature's and the uv map's second-order
+/// terms elsewhere (measured up to 0.4σ near a sphere's pole), where the pixel centre's own is
+/// the better of the two. Across a silhouette, a crease or a uv seam the two are far apart (a
+/// seam moves uv by a whole period), and the sample evaluates its own.
+const SHARE_DISTANCE: f64 = 1.0;
+const SHARE_COVARIANCE: f64 = 1.0;
+
+/// The textures of one pixel's first hits (see [`TextureEvaluator::begin_pixel`]).
+struct FirstHits {
+    /// The pixel, once [`TextureEvaluator::begin_pixel`] named it; without one nothing is shared.
+    pixel: Option<(u32, u32)>,
+    /// How many of `entries` belong to the pixel.
+    len: usize,
+    /// [`FIRST_HITS_KEPT`] entries, allocated once.
+    entries: Vec<FirstHit>,
+}
+
+/// One surface's textures at the pixel centre's footprint.
+struct FirstHit {
+    shape: u32,
+    /// The pixel centre's footprint (uv centre, covariance and its inverse), or `None` when the
+    /// centre's ray misses the shape or its textures went non-finite there: then every sample
+    /// evaluates its own.
+    centre: Option<(DVec2, DMat2, DMat2)>,
+    outputs: Vec<Filtered>,
 }
 
 impl<S: GraphSource> TextureEvaluator<S> {
@@ -145,19 +190,112 @@ impl<S: GraphSource> TextureEvaluator<S> {
             scratches: graphs.iter().map(|g| EvalScratch::new(g.graph())).collect(),
             outputs: vec![zero; slots],
             tmp: vec![zero; per_graph],
+            first_hits: FirstHits {
+                pixel: None,
+                len: 0,
+                entries: (0..FIRST_HITS_KEPT)
+                    .map(|_| FirstHit { shape: u32::MAX, centre: None, outputs: vec![zero; slots] })
+                    .collect(),
+            },
+            last_nonfinite: false,
             source,
         }
+    }
+
+    /// Starts pixel (`x`, `y`): forgets the previous pixel's first-hit textures.
+    ///
+    /// At the first hit of a camera path the footprint is the pixel filter projected onto the
+    /// surface and, with the whole footprint as the texture filter, centred where the pixel
+    /// centre's ray meets it ([`crate::integrator::recentre_fraction`]): every sample of the
+    /// pixel that meets the same surface asks for the same filtered textures. They are
+    /// evaluated once, at the footprint the pixel centre's own ray has there (a function of the
+    /// pixel and the surface alone, so the image does not depend on which samples a render or a
+    /// sample pass takes, or in what order), and each sample whose own footprint agrees with it
+    /// ([`SHARE_DISTANCE`]) reads them.
+    #[inline]
+    pub(crate) fn begin_pixel(&mut self, x: u32, y: u32) {
+        self.first_hits.pixel = Some((x, y));
+        self.first_hits.len = 0;
+    }
+
+    /// The pixel begun last, if one was.
+    #[inline]
+    pub(crate) fn pixel(&self) -> Option<(u32, u32)> {
+        self.first_hits.pixel
+    }
+
+    /// The entry of the current pixel's first hits on `shape`, if one was made.
+    #[inline]
+    pub(crate) fn first_hit(&self, shape: u32) -> Option<usize> {
+        self.first_hits.entries[..self.first_hits.len].iter().position(|e| e.shape == shape)
+    }
+
+    /// Keeps `material`'s textures on `shape` at the pixel centre's footprint `centre` (`None`:
+    /// the centre's ray misses the shape) as the pixel's entry for the shape, and says whether
+    /// it evaluated them; `None` when the pixel keeps [`FIRST_HITS_KEPT`] surfaces already.
+    pub(crate) fn keep_first_hit(
+        &mut self,
+        graphs: &[SceneGraph],
+        material: &Material,
+        shape: u32,
+        centre: Option<Footprint>,
+    ) -> Option<(usize, bool)> {
+        let k = self.first_hits.len;
+        if k >= FIRST_HITS_KEPT {
+            return None;
+        }
+        self.first_hits.len += 1;
+        let n = material.slot_count as usize;
+        let mut evaluated = false;
+        let kept = centre.and_then(|fp| {
+            let cov = fp.cov.as_dmat2();
+            let det = cov.determinant();
+            if !(det > 0.0 && det.is_finite()) {
+                return None;
+            }
+            self.source.shared(true);
+            self.evaluate(graphs, material, &fp);
+            evaluated = true;
+            self.source.shared(false);
+            (!self.last_nonfinite).then(|| (fp.uv.as_dvec2(), cov, cov.inverse()))
+        });
+        let e = &mut self.first_hits.entries[k];
+        e.shape = shape;
+        e.centre = kept;
+        if kept.is_some() {
+            e.outputs[..n].copy_from_slice(&self.outputs[..n]);
+        }
+        Some((k, evaluated))
+    }
+
+    /// Whether a sample whose own first-hit footprint is `fp` reads entry `k`'s textures.
+    #[inline]
+    pub(crate) fn first_hit_accepts(&self, k: usize, fp: &Footprint) -> bool {
+        let Some((uv, cov, inv)) = &self.first_hits.entries[k].centre else { return false };
+        let d = fp.uv.as_dvec2() - *uv;
+        let dc = fp.cov.as_dmat2() - *cov;
+        let frobenius = |m: &DMat2| m.x_axis.length_squared() + m.y_axis.length_squared();
+        d.dot(*inv * d) <= SHARE_DISTANCE * SHARE_DISTANCE
+            && frobenius(&dc) <= SHARE_COVARIANCE * SHARE_COVARIANCE * frobenius(cov)
+    }
+
+    /// Entry `k`'s textures, by slot.
+    #[inline]
+    pub(crate) fn first_hit_outputs(&self, k: usize, material: &Material) -> &[Filtered] {
+        &self.first_hits.entries[k].outputs[..material.slot_count as usize]
     }
 
     /// Evaluates `material`'s graph outputs at footprint `fp`; returns them by slot.
     #[inline]
     pub fn evaluate(&mut self, graphs: &[SceneGraph], material: &Material, fp: &Footprint) -> &[Filtered] {
+        self.last_nonfinite = false;
         for mg in &material.graphs {
             let g = graphs[mg.graph as usize].graph();
             let n = mg.slots.len();
             let scratch = &mut self.scratches[mg.graph as usize];
             self.source.evaluate(g, mg, fp, scratch, &mut self.tmp[..n]);
             if let Some(at) = scratch.take_nonfinite() {
+                self.last_nonfinite = true;
                 if self.sample_origin.is_none() {
                     self.sample_origin = Some(GraphNonFinite {
                         material: material.name.clone(),

@@ -110,6 +110,15 @@ pub struct Counts {
     /// clamped to it.
     #[serde(default)]
     pub clamped_samples: u64,
+    /// First-hit texture evaluations at pixel centres, shared by the pixels' samples.
+    #[serde(default)]
+    pub pixel_texture_evaluations: u64,
+    /// First hits that read their pixel's shared textures.
+    #[serde(default)]
+    pub pixel_texture_reads: u64,
+    /// First hits that could have read them but evaluated their own.
+    #[serde(default)]
+    pub pixel_texture_misses: u64,
 }
 
 impl Counts {
@@ -120,6 +129,9 @@ impl Counts {
         self.shadow_rays += o.shadow_rays;
         self.nonfinite_samples += o.nonfinite_samples;
         self.clamped_samples += o.clamped_samples;
+        self.pixel_texture_evaluations += o.pixel_texture_evaluations;
+        self.pixel_texture_reads += o.pixel_texture_reads;
+        self.pixel_texture_misses += o.pixel_texture_misses;
     }
 }
 
@@ -131,6 +143,9 @@ impl From<&RenderCounts> for Counts {
             shadow_rays: c.shadow_rays,
             nonfinite_samples: c.nonfinite_samples,
             clamped_samples: c.clamped_samples,
+            pixel_texture_evaluations: c.pixel_texture_evaluations,
+            pixel_texture_reads: c.pixel_texture_reads,
+            pixel_texture_misses: c.pixel_texture_misses,
         }
     }
 }

@@ -120,6 +120,12 @@ struct RenderArgs {
     /// render time (for benchmarks).
     #[arg(long)]
     free_textures: bool,
+    /// Evaluate every sample's first-hit textures at its own footprint. By default the samples
+    /// of a pixel that meet the same surface share one evaluation at the pixel centre's
+    /// footprint (with the default --filter-scale 1, where every sample's footprint is centred
+    /// there anyway): same image up to rounding, fewer evaluations.
+    #[arg(long)]
+    per_sample_textures: bool,
     /// Texels per uv unit at level 0 for footprint LODs in AOVs.
     #[arg(long, default_value_t = 1024.0)]
     aov_density: f64,
@@ -419,6 +425,7 @@ impl<'a> RenderJob<'a> {
             footprint: args.footprint,
             footprint_aov_density: want_aov.then_some(args.aov_density),
             free_textures: args.free_textures,
+            per_sample_textures: args.per_sample_textures,
             filter_scale: args.filter_scale,
             sample_range: args.samples,
             window,
@@ -527,6 +534,14 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
             "procedural textures: {node_evals} node evaluations ({:.1} per sample) in {} graph(s)",
             node_evals as f64 / c.samples.max(1) as f64,
             scene.graphs.len()
+        );
+    }
+    if c.pixel_texture_evaluations > 0 {
+        eprintln!(
+            "first hits: {} of {} read their pixel's textures, evaluated once per pixel and surface ({} evaluations)",
+            c.pixel_texture_reads,
+            c.pixel_texture_reads + c.pixel_texture_misses,
+            c.pixel_texture_evaluations
         );
     }
     if let Some(nc) = &r.node_cache {

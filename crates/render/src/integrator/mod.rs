@@ -102,6 +102,15 @@ pub struct RenderCounts {
     pub nonfinite_samples: u64,
     /// Samples with a channel beyond [`crate::film::SAMPLE_LIMIT`], clamped to it.
     pub clamped_samples: u64,
+    /// First-hit texture evaluations at a pixel centre's footprint, one per pixel and surface
+    /// (see [`crate::shading::TextureEvaluator::begin_pixel`]).
+    pub pixel_texture_evaluations: u64,
+    /// Camera samples' first hits that read their pixel's shared textures.
+    pub pixel_texture_reads: u64,
+    /// First hits that could have shared their pixel's textures but evaluated their own (a
+    /// silhouette, a seam, more surfaces in the pixel than it keeps, or a value that was not
+    /// finite at the pixel centre).
+    pub pixel_texture_misses: u64,
 }
 
 impl RenderCounts {
@@ -111,6 +120,9 @@ impl RenderCounts {
         self.shadow_rays += o.shadow_rays;
         self.nonfinite_samples += o.nonfinite_samples;
         self.clamped_samples += o.clamped_samples;
+        self.pixel_texture_evaluations += o.pixel_texture_evaluations;
+        self.pixel_texture_reads += o.pixel_texture_reads;
+        self.pixel_texture_misses += o.pixel_texture_misses;
     }
 }
 
@@ -174,6 +186,11 @@ pub struct RenderSettings {
     pub window: Option<Bucket>,
     /// Keep each pixel's exact sum in [`RenderOutput::sums`].
     pub keep_sums: bool,
+    /// Evaluate every camera sample's first-hit textures at its own footprint. By default the
+    /// samples of a pixel that meet the same surface share one evaluation at the pixel
+    /// centre's footprint there, when the footprint is centred on the pixel centre anyway (the
+    /// default filter scale; see [`crate::shading::TextureEvaluator::begin_pixel`]).
+    pub per_sample_textures: bool,
 }
 
 /// How wide textures are filtered relative to the path footprint.
@@ -251,6 +268,7 @@ impl RenderSettings {
             sample_range: None,
             window: None,
             keep_sums: false,
+            per_sample_textures: false,
         }
     }
 
@@ -465,6 +483,7 @@ pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
     obs: &mut O,
 ) -> PixelSum {
     let mut sum = PixelSum::default();
+    textures.begin_pixel(x, y);
     for s in samples {
         let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
         textures.begin_sample(s);

@@ -117,14 +117,26 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) ->
     CentreShift { uv: (local.uv_jacobian * shift).as_vec2(), p: (v.t * shift.x + v.b * shift.y).as_vec3() }
 }
 
+/// Whether camera rays' first hits read their pixel's shared textures: with covariance
+/// footprints centred all the way on the pixel centre (the whole footprint as the filter,
+/// [`recentre_fraction`] 1), unless [`RenderSettings::per_sample_textures`] asks otherwise.
+fn shares_pixel_textures(settings: &RenderSettings) -> bool {
+    !settings.per_sample_textures
+        && settings.footprint == FootprintMode::Covariance
+        && recentre_fraction(settings.filter_scale.at(settings.spp)) >= 1.0
+}
+
 /// What a material's textures are filtered over at a hit: the hit as a footprint vertex (none
 /// when footprints are not tracked: textures are then read at a point, the default), the
 /// path's tangent-plane covariance there, and where the filter is centred relative to the hit.
+/// `pixel`: the camera ray's hit with its footprint centred all the way on the pixel centre,
+/// whose textures the pixel's samples share ([`TextureEvaluator::begin_pixel`]).
 #[derive(Clone, Copy, Debug, Default)]
 struct TextureFootprint {
     vertex: Option<Vertex>,
     var: DMat2,
     shift: CentreShift,
+    pixel: bool,
 }
 
 /// The footprint a camera path carries from vertex to vertex (pbrt carries its ray
@@ -167,22 +179,22 @@ impl FootprintCarrier {
         d: Vec3,
     ) -> TextureFootprint {
         if !self.track {
-            return TextureFootprint { vertex: None, var: DMat2::ZERO, shift: CentreShift::default() };
+            return TextureFootprint::default();
         }
         let v = si.footprint_vertex();
         let next = 1 - self.cur;
-        let (var, shift) = match &self.last {
+        let (var, shift, pixel) = match &self.last {
             None => {
                 let (state, var) = PathFootprint::start(settings.footprint, &scene.camera, cam, &v, settings.spp);
                 self.states[next] = state;
-                (var, first_vertex_shift(settings, cam, &v))
+                (var, first_vertex_shift(settings, cam, &v), shares_pixel_textures(settings))
             }
             Some((pv, bs)) => {
                 self.states[next] = self.states[self.cur];
-                (self.states[next].advance(pv, bs, d, &v), CentreShift::default())
+                (self.states[next].advance(pv, bs, d, &v), CentreShift::default(), false)
             }
         };
-        TextureFootprint { vertex: Some(v), var, shift }
+        TextureFootprint { vertex: Some(v), var, shift, pixel }
     }
 
     /// The path scatters at the hit it arrived at last: it keeps the footprint there.
@@ -246,8 +258,47 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                 }
                 None => si.graph_footprint(Mat2::ZERO),
             };
+            if tf.pixel {
+                if let Some(k) = self.pixel_textures(material, si.shape, &fp) {
+                    self.counts.pixel_texture_reads += 1;
+                    return self.textures.first_hit_outputs(k, material);
+                }
+                self.counts.pixel_texture_misses += 1;
+            }
             self.textures.evaluate(&self.scene.graphs, material, &fp)
         }
+    }
+
+    /// The entry of the pixel's shared first-hit textures on `shape` that a camera sample whose
+    /// own footprint there is `fp` reads (made on the pixel's first sample to meet the shape),
+    /// if it may read one.
+    fn pixel_textures(&mut self, material: &'a Material, shape: u32, fp: &graph::Footprint) -> Option<usize> {
+        let k = match self.textures.first_hit(shape) {
+            Some(k) => k,
+            None => {
+                let centre = self.pixel_centre_footprint(shape);
+                let (k, evaluated) = self.textures.keep_first_hit(&self.scene.graphs, material, shape, centre)?;
+                self.counts.pixel_texture_evaluations += u64::from(evaluated);
+                k
+            }
+        };
+        self.textures.first_hit_accepts(k, fp).then_some(k)
+    }
+
+    /// The footprint textures on `shape` are filtered over at the first hit of the current
+    /// pixel's centre ray (the camera ray with no film offset), wherever that ray meets the
+    /// shape, in front of it or not; `None` when it misses the shape.
+    fn pixel_centre_footprint(&self, shape: u32) -> Option<graph::Footprint> {
+        let scene = self.scene;
+        let (x, y) = self.textures.pixel()?;
+        let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
+        let hit = scene.accel.intersect_shape(&scene.shapes, &cam.ray, shape)?;
+        let si = interaction(&scene.shapes, &cam.ray, &hit);
+        let v = si.footprint_vertex();
+        let (_, var) = PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, self.settings.spp);
+        let cov = footprint::uv_covariance(var, &v).as_mat2() * self.settings.filter_scale_squared();
+        let fp = si.graph_footprint(cov);
+        (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
     }
 
     /// What a shadow ray lets through: 0 when an opaque surface blocks it, otherwise the
@@ -276,7 +327,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                     let v = si.footprint_vertex();
                     let mut state = *fp;
                     let var = state.advance(cur, bs, shadow.d, &v);
-                    TextureFootprint { vertex: Some(v), var, shift: CentreShift::default() }
+                    TextureFootprint { vertex: Some(v), var, shift: CentreShift::default(), pixel: false }
                 }
                 _ => TextureFootprint::default(),
             };

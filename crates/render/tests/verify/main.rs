@@ -9,5 +9,6 @@ mod footprint_mc;
 mod mtlx;
 mod opacity;
 mod passes;
+mod pixel_textures;
 mod reference;
 mod selective;

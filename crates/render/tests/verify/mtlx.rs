@@ -45,8 +45,14 @@ fn graph_texture_renders_and_counts_evaluations() {
     let g = scene.graphs[0].graph();
     let checker = g.node_id("NG_checker/checker").expect("node");
     let evals = out.graph_stats[0].evaluations[checker.0 as usize];
-    // One evaluation per floor hit: the floor covers the lower part of the image.
-    assert!(evals > 64 * 20 * 2 && evals <= 64 * 48 * 2, "{evals}");
+    // One evaluation per floor pixel (its two samples share their first hit's textures): the
+    // floor covers the lower part of the image.
+    assert!(evals > 64 * 20 && evals <= 64 * 48, "{evals}");
+    // One per floor hit when every sample evaluates its own.
+    let own = render(&scene, RenderSettings { per_sample_textures: true, ..RenderSettings::new(2, 1) }, &|_| {});
+    let own_evals = own.graph_stats[0].evaluations[checker.0 as usize];
+    assert!(own_evals > 64 * 20 * 2 && own_evals <= 64 * 48 * 2, "{own_evals}");
+    assert!(evals * 3 < own_evals * 2, "shared {evals}, per sample {own_evals}");
     // The noise output is not bound, so never evaluated.
     let noise = g.node_id("NG_checker/noise").unwrap();
     assert_eq!(out.graph_stats[0].evaluations[noise.0 as usize], 0);

@@ -1,0 +1,105 @@
+//! First-hit textures shared by a pixel's samples: the image is the per-sample image up to
+//! rounding (and the Monte Carlo decisions that rounding flips), no further from a converged
+//! reference, for a small share of the evaluations; silhouettes, where a sample's surface is
+//! not the pixel centre's, fall back to per-sample evaluation.
+
+use render::film::{relative_mse, Image};
+use render::integrator::{render, FilterScale, RenderOutput, RenderSettings};
+use std::path::{Path, PathBuf};
+
+/// A checkered floor to a grazing horizon and a checkered ball standing on it (its silhouette
+/// against the floor and the sky), lit by a sun and a dim sky; one bounce, so every texture
+/// evaluation is a camera ray's first hit.
+fn scene() -> render::scene::Scene {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let texture = r#"<texture type="mtlx" name="reflectance"><string name="filename" value="checker.mtlx"/><string name="output" value="NG_checker/out"/></texture>"#;
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+        <sensor type="perspective"><float name="fov" value="50"/>
+            <transform name="to_world"><lookat origin="0, 0.5, 3" target="0, 0.2, -4" up="0, 1, 0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="48"/><integer name="height" value="36"/><rfilter type="gaussian"/></film>
+        </sensor>
+        <shape type="rectangle">
+            <transform name="to_world"><scale value="8"/><rotate x="1" angle="-90"/></transform>
+            <bsdf type="diffuse">{texture}</bsdf>
+        </shape>
+        <shape type="sphere"><point name="center" x="0.3" y="0.5" z="0"/><float name="radius" value="0.5"/>
+            <bsdf type="diffuse">{texture}</bsdf>
+        </shape>
+        <emitter type="directional"><vector name="direction" x="0.2" y="-1" z="-0.3"/><rgb name="irradiance" value="3"/></emitter>
+        <emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>
+    </scene>"#
+    );
+    render::loader::load_str(&xml, Path::new("pixel_textures.xml"), &data, &[]).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn run(scene: &render::scene::Scene, spp: u32, seed: u64, per_sample: bool) -> RenderOutput {
+    render(scene, RenderSettings { per_sample_textures: per_sample, ..RenderSettings::new(spp, seed) }, &|_| {})
+}
+
+fn evaluations(out: &RenderOutput) -> u64 {
+    out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum()
+}
+
+#[test]
+fn shared_first_hit_textures_match_per_sample_ones_for_a_fraction_of_the_work() {
+    let scene = scene();
+    let spp = 8;
+    let shared = run(&scene, spp, 5, false);
+    let own = run(&scene, spp, 5, true);
+    let reference: Image = run(&scene, 512, 99, true).image;
+    let (e_shared, e_own) = (relative_mse(&shared.image, &reference), relative_mse(&own.image, &reference));
+    let apart = relative_mse(&shared.image, &own.image);
+    let (n_shared, n_own) = (evaluations(&shared), evaluations(&own));
+    eprintln!(
+        "error vs reference: shared {e_shared:.4e}, per sample {e_own:.4e}; shared vs per sample {apart:.3e}; evaluations {n_shared} vs {n_own}"
+    );
+    // Nearly the same image: far closer to each other than either is to the reference (they
+    // differ where a sample's own footprint, extrapolated from its hit, was not the pixel's).
+    assert!(apart < 1e-2 * e_own, "shared and per-sample images differ by {apart:.3e} (8-spp error {e_own:.3e})");
+    assert!(e_shared <= 1.02 * e_own, "sharing moved the image away from the reference: {e_shared:.4e} vs {e_own:.4e}");
+    // One evaluation per pixel and surface, and per sample only at silhouettes.
+    assert!(n_shared * 4 < n_own, "evaluations: shared {n_shared}, per sample {n_own}");
+    assert!(n_shared * 8 > n_own, "every pixel still evaluates once: shared {n_shared}, per sample {n_own}");
+    assert!(shared.image.pixels.iter().all(|p| p.is_finite()));
+}
+
+/// Where footprints are not centred on the pixel (a narrower texture filter), every sample
+/// reads its own: the setting changes nothing there.
+#[test]
+fn narrower_filters_evaluate_per_sample() {
+    let scene = scene();
+    let settings = |per_sample| RenderSettings {
+        per_sample_textures: per_sample,
+        filter_scale: FilterScale::Fixed(0.5),
+        ..RenderSettings::new(4, 3)
+    };
+    let a = render(&scene, settings(false), &|_| {});
+    let b = render(&scene, settings(true), &|_| {});
+    assert_eq!(a.image.pixels, b.image.pixels);
+    assert_eq!(evaluations(&a), evaluations(&b));
+}
+
+/// Split into sample passes and rendered on other thread counts, a render with shared
+/// textures is the same image bit for bit: what a pixel shares depends on the pixel and the
+/// surface alone, not on which of its samples came first.
+#[test]
+fn shared_textures_do_not_depend_on_sample_order_or_threads() {
+    let scene = scene();
+    let whole = run(&scene, 6, 8, false);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+    let threaded = pool.install(|| run(&scene, 6, 8, false));
+    assert_eq!(whole.image.pixels, threaded.image.pixels);
+    let part = |a, b| {
+        let s = RenderSettings { sample_range: Some((a, b)), keep_sums: true, ..RenderSettings::new(6, 8) };
+        render(&scene, s, &|_| {}).sums.unwrap()
+    };
+    let all = render(&scene, RenderSettings { keep_sums: true, ..RenderSettings::new(6, 8) }, &|_| {}).sums.unwrap();
+    let (p, q) = (part(0, 2), part(2, 6));
+    for ((a, b), c) in p.iter().zip(&q).zip(&all) {
+        let mut m = *a;
+        m.merge(b);
+        assert_eq!(m, *c);
+    }
+}
