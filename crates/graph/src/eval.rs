@@ -493,12 +493,15 @@ impl Graph {
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];
             let node = &self.nodes[id.0 as usize];
+            // Each arm copies straight into the slot: a value assembled in a temporary and copied
+            // from there is read back across the temporary's fresh stores (a stall per input).
             for ((slot, s), c) in ins.iter_mut().zip(&node.inputs).zip(node.consts.iter()) {
-                *slot = match s {
-                    Source::Constant(_) => *c,
-                    Source::Texcoord => *tc,
-                    _ => self.resolve(s, fp, point, scratch),
-                };
+                match s {
+                    Source::Constant(_) => *slot = *c,
+                    Source::Texcoord => *slot = *tc,
+                    Source::Node { node, channel: None } => *slot = scratch.values[node.0 as usize],
+                    _ => *slot = self.resolve(s, fp, point, scratch),
+                }
             }
             let n_in = node.inputs.len();
             let i = id.0 as usize;
