@@ -524,7 +524,7 @@ impl Graph {
             }
             let start = scratch.timing_start(i);
             let mut ctx = Ctx { fp, point, work: &mut scratch.stats.work };
-            scratch.values[i] = nodes::eval(&node.op, node.ty, &ins[..n_in], &mut ctx);
+            nodes::eval_into(&node.op, node.ty, &ins[..n_in], &mut ctx, &mut scratch.values[i]);
             scratch.timing_end(i, start);
             scratch.stats.evaluations[i] += scratch.instrumented as u64;
         }

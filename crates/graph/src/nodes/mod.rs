@@ -282,11 +282,15 @@ pub(crate) struct Ctx<'a> {
     pub work: &'a mut Work,
 }
 
-/// Evaluates one node filtered, from its (already filtered) inputs.
-/// Evaluates `op`; at points (unfiltered evaluation) the result carries no uv gradient, whatever
-/// the node family computed on the way.
-pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
-    let mut out = match op {
+/// Evaluates one node filtered, from its (already filtered) inputs, into `out`. At points
+/// (unfiltered evaluation) the result carries no uv gradient, whatever the node family computed
+/// on the way.
+///
+/// The value is written in place: returned and then stored, it went through temporaries that
+/// each copy read back across their fresh stores (a store-forwarding stall per node).
+#[inline]
+pub(crate) fn eval_into(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx, out: &mut Filtered) {
+    *out = match op {
         Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
         Op::Noise(n) => noise::eval(n, ty, ins, ctx),
         Op::Noise3d(n) => noise::eval3d(n, ty, ins, ctx),
@@ -309,6 +313,12 @@ pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> F
             c.grad = glam::Vec2::ZERO;
         }
     }
+}
+
+/// [`eval_into`], returning the value.
+pub(crate) fn eval(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let mut out = Filtered::zero(ty);
+    eval_into(op, ty, ins, ctx, &mut out);
     out
 }
 
