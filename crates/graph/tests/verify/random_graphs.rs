@@ -486,6 +486,18 @@ fn regressions_found_by_the_fuzzer() {
     let uv = || Source::Texcoord;
     type Case = (&'static str, &'static str, T, Vec<(&'static str, Source)>, Vec2);
     let cases: Vec<Case> = vec![
+        // A huge amount times huge luminance coefficients: infinite weights of both signs.
+        (
+            "saturate of a huge amount and coefficients",
+            "saturate",
+            T::Color4,
+            vec![
+                ("in", c(T::Color4, &[0.0577, 0.0577, 0.0577, 0.0577])),
+                ("amount", c(T::Float, &[3.4e38])),
+                ("lumacoeffs", c(T::Color3, &[-4.8e13, 6.95e6, 6.95e6])),
+            ],
+            Vec2::new(0.3, 0.4),
+        ),
         // 0 · ∞ in exp's variance and gradient.
         ("exp overflow", "exp", T::Vector2, vec![("in", c(T::Vector2, &[1e6, -1e6]))], Vec2::new(0.3, 0.4)),
         ("exp of a huge uv", "exp", T::Vector2, vec![("in", uv())], Vec2::new(1.5, 2.8)),
