@@ -15,6 +15,7 @@ pub const EXCLUDED: &[(&str, &str)] = &[
     ("image", "needs a file"),
     ("tiledimage", "needs a file"),
     ("hextiledimage", "needs a file"),
+    ("hextilednormalmap", "needs a file"),
     ("latlongimage", "needs a file"),
     ("triplanarprojection", "needs a file"),
     ("creatematrix", "matrices are folded at load, not evaluated"),
