@@ -43,10 +43,28 @@ const IMAGE_MAX: f32 = 0.2;
 const IMAGE_MEAN: f32 = 0.025;
 /// Fraction of the values of an image-based bake allowed beyond `IMAGE_MAX · R`.
 const IMAGE_OUTLIERS: f32 = 0.001;
+/// Mesa's documented worst-case absolute error of its GLSL `asin` (a polynomial in `√(1 − |x|)`:
+/// 0.00039, Mesa commit "glsl: improve the accuracy of the asin() builtin function"), which
+/// llvmpipe runs, and of `acos` (`π/2 − asin`). GLSL and Vulkan 1.0's precision tables leave the
+/// inverse trigonometric functions' precision undefined (later Vulkan versions allow 4096 ULP for
+/// `atan` and inherit `asin`/`acos` from `atan2`, which at |x| ≤ 1 is about 5e-4: looser still).
+/// Bakes whose output is an `asin` or `acos` node are compared with this absolute tolerance in
+/// place of [`ANALYTIC_TOL`]; nothing else is.
+const GPU_ASIN_ABS: f32 = 3.9e-4;
+
+/// Whether a bake's output is an `asin` or `acos` node, compared with [`GPU_ASIN_ABS`]: own
+/// references by their nodedef, the shared suite's by its trig document's graphs.
+fn inverse_trig(nodedef: Option<&str>, doc: &str, element: &str) -> bool {
+    match nodedef {
+        Some(nd) => nd.starts_with("ND_asin_") || nd.starts_with("ND_acos_"),
+        None => doc.ends_with("math/trig.mtlx") && (element.starts_with("asin_") || element.starts_with("acos_")),
+    }
+}
+
 /// Bakes that pass today: a regression floor on top of the per-bake check against the table.
-const MIN_PASS: usize = 248;
+const MIN_PASS: usize = 253;
 /// The same floor for tessera's own references (`tests/mtlx-refs`).
-const MIN_OWN_PASS: usize = 635;
+const MIN_OWN_PASS: usize = 651;
 
 /// Explanations of known differences, appended to failures: (document suffix, element prefix,
 /// note).
@@ -63,22 +81,10 @@ const NOTES: &[(&str, &str, &str)] = &[
         "MaterialX differentiates the minified image across one pixel of its bake (dFdx/dFdy), so its normals \
          depend on the bake resolution; ours are the slope of the filtered height",
     ),
-    ("math/trig.mtlx", "asin_nodegraph", "the GPU's asin(0.5) is 2.1e-4 below π/6 = 0.5235988, which ours gives"),
 ];
 
 /// Explanations of known differences from tessera's own references (`tests/mtlx-refs`).
 const OWN_NOTES: &[(&str, &str, &str)] = &[
-    (
-        "docs/asin.mtlx",
-        "",
-        "llvmpipe's asin is up to 3.9e-4 off near ±1 (asin(−0.9296) = −1.193281, which ours gives; the GPU says \
-         −1.193669), as the shared suite's asin(0.5) is",
-    ),
-    (
-        "docs/acos.mtlx",
-        "",
-        "llvmpipe's acos is up to 1.6e-4 off (its asin, shifted by π/2); ours is the f32 libm value",
-    ),
     (
         "docs/fractal2d.mtlx",
         "",
@@ -97,9 +103,17 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
     (
         "docs/hextiledimage.mtlx",
         "",
-        "MaterialX's GLSL flips v (mx_transform_uv_vflip, as its renderers set fileTextureVerticalFlip) before it \
-         hex-tiles, so its tiles and their random rotations, scales and offsets are those of (u, 1 − v); with the \
-         per-tile randomisation off the two agree to a mean error of 0.004",
+        "after placing the tiles in MaterialX's v-flipped coordinate (mx_transform_uv_vflip before the hex \
+         tiling, as its renderers and TextureBaker set fileTextureVerticalFlip) the mean error fell from 0.28 to \
+         0.066 and the values beyond 0.2 R from 1026 to 129; what is left is not yet explained (every input is a \
+         ramp, so each texel has its own tiling, rotation, scale and offset ranges)",
+    ),
+    (
+        "docs/hextilednormalmap.mtlx",
+        "",
+        "5 of 1728 values (two texels at u ≈ 0.94–0.98, v ≈ 0.06) are beyond 0.2 R, a fraction 0.0029 where the \
+         image bound allows 0.001; the mean error (0.0009) is a third of its bound. Not yet explained; the unfiltered node matches a \
+         transcription of MaterialX's GLSL to 1e-4 (crates/graph/tests/verify/hextile.rs)",
     ),
     (
         "docs/splitlr.mtlx",
@@ -158,6 +172,17 @@ fn previous_passes(text: &str) -> Vec<(String, String)> {
 
 /// Compares a bake with the reference EXR.
 fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String], textured: bool) -> Outcome {
+    compare_with(baked, reference, names, textured, ANALYTIC_TOL)
+}
+
+/// [`compare`], analytic bakes with absolute tolerance `abs_tol` (relative beyond magnitude 1).
+fn compare_with(
+    baked: &graph::BakedImage,
+    reference: &common::Exr,
+    names: &[String],
+    textured: bool,
+    abs_tol: f32,
+) -> Outcome {
     let (w, h) = (baked.width as usize, baked.height as usize);
     if reference.width != w || reference.height != h {
         return Outcome::Fail(format!("reference is {}x{}, bake {w}x{h}", reference.width, reference.height));
@@ -187,7 +212,7 @@ fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String],
                 let e = if got.is_finite() { (got - want).abs() } else { f32::INFINITY };
                 count += 1;
                 sum += e as f64;
-                let tol = if textured { IMAGE_MAX * range } else { ANALYTIC_TOL * want.abs().max(1.0) };
+                let tol = if textured { IMAGE_MAX * range } else { abs_tol * want.abs().max(1.0) };
                 if e > tol {
                     off += 1;
                     cols = (cols.0.min(i), cols.1.max(i));
@@ -296,7 +321,9 @@ fn run(set: &RefSet) -> Run {
                     b["channels"].as_array().unwrap().iter().map(|c| c.as_str().unwrap().to_string()).collect();
                 match bake::bake_element(doc, &element, &settings) {
                     Ok(baked) => {
-                        let outcome = compare(&baked, &img, &names, textured);
+                        let trig = inverse_trig(b["nodedef"].as_str(), &doc_path, &element);
+                        let tol = if trig { GPU_ASIN_ABS } else { ANALYTIC_TOL };
+                        let outcome = compare_with(&baked, &img, &names, textured, tol);
                         if textured && matches!(outcome, Outcome::Pass { .. }) {
                             // The bound must still tell a v-flipped bake from the right one,
                             // unless the reference itself is nearly symmetric in v.
@@ -417,6 +444,16 @@ fn materialx_conformance() {
          range R (at least 0.05): mean error at most {IMAGE_MEAN} R, and at most a fraction {IMAGE_OUTLIERS} of \
          the values beyond {IMAGE_MAX} R (GL's trilinear mip-mapping against exact Gaussian filtering; the \
          same bound rejects v-flipped bakes). Texels MaterialX leaves undefined (NaN) are skipped.\n"
+    );
+    let _ = writeln!(
+        md,
+        "One stated exception: bakes whose output is an `asin` or `acos` node (nodedefs `ND_asin_*`, `ND_acos_*`; \
+         the shared suite's `asin_*`/`acos_*` graphs of `math/trig.mtlx`) are compared with the absolute tolerance \
+         {GPU_ASIN_ABS:e} in place of {ANALYTIC_TOL:e}: Mesa's documented worst-case absolute error of the GLSL \
+         `asin` it compiles for llvmpipe (a polynomial in √(1 − |x|): 0.00039, Mesa commit \"glsl: improve the \
+         accuracy of the asin() builtin function\"; `acos` is π/2 − asin). GLSL's and Vulkan 1.0's precision \
+         tables leave the inverse trigonometric functions undefined; no other function is given more than \
+         {ANALYTIC_TOL:e}.\n"
     );
     let _ = writeln!(
         md,
