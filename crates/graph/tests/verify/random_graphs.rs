@@ -640,3 +640,18 @@ fn regressions_found_by_the_fuzzer() {
         assert!((g.eval_output(out, &Footprint::isotropic(p, 1e-3), &mut scratch).ch[0].mean - inside).abs() < 1e-3);
     }
 }
+
+/// The fuzzer really builds the nodes that need more than wiring: those given a file
+/// (`fuzz::WITH_FILE`) and the multi-output flakes (their output chosen by type).
+#[test]
+fn file_and_multi_output_nodes_are_drawn() {
+    let mut rng = Rng(0x5eed_f11e);
+    let mut listings = String::new();
+    for _ in 0..400 {
+        let size = 2 + (rng.next_u64() % 39) as usize;
+        listings += &fuzz::random_graph(&mut rng, size, false).listing;
+    }
+    for cat in fuzz::WITH_FILE.iter().chain(&["flake2d", "flake3d"]) {
+        assert!(listings.contains(&format!(" = {cat}<")), "`{cat}` is never built");
+    }
+}
