@@ -37,8 +37,9 @@
 //! `σ = mix(1, mix(scalerange)(r.y), scale)`, `o = mix(offsetrange)(r · offset)` per axis. The
 //! blend weights are `w ∝ (1 + falloffcontrast (luma(colour) − 1)) · b⁷`, normalised, then, when
 //! `falloff ≠ 0.5`, passed through Schlick's gain with parameter `falloff` (clamped to
-//! [0.001, 0.999]) and normalised again. RGB is `Σ w c`; the alpha of `color4` is the plain
-//! mean of the three alphas (gained when `falloff ≠ 0.5`), as in MaterialX. Where the weights
+//! [0.001, 0.999]) and normalised again. RGB is `Σ w c`; the alpha of `color4` is `Σ aw a`, the
+//! three alphas blended with the weights of luminance factor 1 (`b⁷` normalised, then the gain),
+//! as MaterialX 1.39.5's GLSL and OSL blend it. Where the weights
 //! sum to 0 (black texels with `falloffcontrast = 1`, where MaterialX divides by 0) the
 //! luminance factor is dropped; a tile scale of 0 is taken as ±1e-6.
 //!
@@ -65,8 +66,8 @@
 //!   take a surrogate lookup: the three's plain mean where the tiles' maps agree, the image's
 //!   mean where they are unrelated, mixed by their coherence (see `Params::coherence`: 1 when
 //!   all ranges have zero width, so that `hextiledimage` is then exactly `tiledimage` at every
-//!   footprint). Alpha (`color4`) is the nodes' mean of the gain of each node's plain
-//!   three-tile mean, over that mean's spread (Gauss–Hermite).
+//!   footprint). Alpha (`color4`) is filtered as the colour, with the weight masses of its own
+//!   weights `aw`.
 //! - *Beyond a tile.* From `ρ = `[`NEAR`] to [`FAR`] the result moves to the surrogate by a
 //!   smoothstep in `log ρ` (the 25-node rule no longer resolves the tiles); from `FAR` on, when
 //!   the tiles are unrelated (or every lookup is blurred past 1.5 image periods), the node
@@ -467,14 +468,10 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
     let mut out = Filtered::zero(ty);
     if alpha >= 1.0 && (kappa < 1e-4 || lambda >= (BLURRED * p.max_scale()).powi(2)) {
         // Much larger than a tile, and the tiles' lookups unrelated or each blurred to the
-        // image's mean: the image's mean (alpha: the gain of the mean of three independent
-        // texels).
+        // image's mean: the image's mean.
         ctx.work.lattice += 1;
         for k in 0..n {
-            let (mut m, mut v) = global(k);
-            if k == 3 {
-                (m, v, _) = alpha_gain(m, v / 3.0, p.falloff);
-            }
+            let (m, v) = global(k);
             out.ch[k] = Moments { mean: m as f32, grad: Vec2::ZERO, var: v as f32 };
         }
         return out;
@@ -524,14 +521,9 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         sur_grad[k] = samples.iter().map(|s| s.grad[k]).sum::<DVec2>() * (kappa / 3.0);
     }
     let cw_far = luma_factor(&sur_val, &sur_grad);
-    // Alpha's inputs: the three lookups' alphas, the other tiles', and its spread.
-    let alpha_in = (n == 4).then(|| {
-        let (gmean, gvar) = global(3);
-        let avg_sd: f64 = samples.iter().map(|s| s.var[3].sqrt()).sum::<f64>() / 3.0;
-        let far_var = kappa * avg_sd * avg_sd + (1.0 - kappa) * gvar / 3.0;
-        (samples.each_ref().map(|s| s.val[3]), sur_val[3], avg_sd * avg_sd, gmean, far_var)
-    });
     let mut m = Masses::default();
+    // Alpha blends with luminance factor 1 (its own weights, `aw`).
+    let mut ma = Masses::default();
     for_footprint_nodes(c, &cov, rho, |x, wt| {
         let at = triangle(x);
         let slot = at.ids.map(|id| tri.ids.iter().position(|t| *t == id));
@@ -554,20 +546,17 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                 }
             }
         }
-        if let Some((a3, a_far, var, ..)) = alpha_in {
-            // Alpha is the plain mean of the node's three tiles (a step across triangle edges).
-            let a_at = |s: Option<usize>| match s {
-                Some(k) => a3[k] + samples[k].grad[3].dot(dx),
-                None => a_far + sur_grad[3].dot(dx),
-            };
-            let mean = slot.iter().map(|s| a_at(*s)).sum::<f64>() / 3.0;
-            let (g, gv, slope) = alpha_gain(mean, var, p.falloff);
-            m.alpha += wt * g;
-            m.alpha2 += wt * (gv + g * g);
-            for sv in slot {
-                match sv {
-                    Some(k) => m.alpha_slope[k] += wt * slope / 3.0,
-                    None => m.alpha_slope_far += wt * slope / 3.0,
+        if n == 4 {
+            for (v, wv) in blend(&p, at.bary, [Dual::constant(1.0); 3]).into_iter().enumerate() {
+                match slot[v] {
+                    Some(k) => {
+                        ma.w[k] = ma.w[k] + wv * wt;
+                        ma.wx[k] += dx * (wv.v * wt);
+                    }
+                    None => {
+                        ma.far = ma.far + wv * wt;
+                        ma.wx_far += dx * (wv.v * wt);
+                    }
                 }
             }
         }
@@ -579,7 +568,9 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         // else the image's mean.
         let sur = Dual::new(sur_val[k], sur_grad[k]);
         let (val, grad, var);
-        if k < 3 {
+        {
+            // Colour by the luminance-weighted blend, alpha by its own (MaterialX 1.39.5's `aw`).
+            let m = if k < 3 { &m } else { &ma };
             let gvar = global(k).1;
             let sur_var = kappa * avg_sd * avg_sd + (1.0 - kappa) * gvar;
             // The three tiles' and the others' weight masses over the footprint.
@@ -602,18 +593,6 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
             val = vc + (sur.v - vc) * alpha;
             grad = gc * (1.0 - alpha) + sur.d * alpha;
             var = var_c + (sur_var - var_c) * alpha;
-        } else {
-            let (_, _, _, _, far_var) = alpha_in.expect("four channels");
-            let mut gc = sur.d * m.alpha_slope_far;
-            for (sl, s) in m.alpha_slope.iter().zip(&samples) {
-                gc += s.grad[3] * *sl;
-            }
-            let var_c = (m.alpha2 - m.alpha * m.alpha).max(0.0);
-            // Beyond a tile: the gain of the mean of three other tiles.
-            let (e, ev, slope) = alpha_gain(sur.v, far_var, p.falloff);
-            val = m.alpha + (e - m.alpha) * alpha;
-            grad = gc * (1.0 - alpha) + sur.d * (slope * alpha);
-            var = (var_c + (ev - var_c) * alpha).max(quad(&cov, grad));
         }
         // Back to uv: c = (u tₓ, 1 − v t_y).
         let g_uv = tc.ch[0].grad * (grad.x * t.x) as f32 - tc.ch[1].grad * (grad.y * t.y) as f32;
@@ -644,8 +623,7 @@ pub(super) fn blend(p: &Params, bary: [Dual; 3], cw: [Dual; 3]) -> [Dual; 3] {
 const CENTRE_ONLY: f64 = 5e-3;
 
 /// What the blend gives each tile over the footprint: the weight masses of the centre
-/// triangle's three tiles and of all others, and alpha's expectation, second moment and its
-/// slopes in each tile's alpha.
+/// triangle's three tiles and of all others, and their first moments.
 #[derive(Default)]
 struct Masses {
     w: [Dual; 3],
@@ -653,10 +631,6 @@ struct Masses {
     /// First moments `E[w (x − c)]`.
     wx: [DVec2; 3],
     wx_far: DVec2,
-    alpha: f64,
-    alpha2: f64,
-    alpha_slope: [f64; 3],
-    alpha_slope_far: f64,
 }
 
 /// Calls `f(x, weight)` for the nodes of a cubature over the footprint `N(c, cov)`: 5 × 5
@@ -684,20 +658,6 @@ pub(super) fn factor(c: &DMat2) -> DMat2 {
     let l11 = a.sqrt();
     let l21 = b / l11;
     DMat2::from_cols(DVec2::new(l11, l21), DVec2::new(0.0, (d - l21 * l21).max(0.0).sqrt()))
-}
-
-/// Alpha's gain (identity when `falloff = 0.5`) of a value spread as `N(m, v)`: its expectation
-/// and variance (5-point Gauss–Hermite) and the slope of the expectation in `m` (Stein).
-fn alpha_gain(m: f64, v: f64, falloff: f64) -> (f64, f64, f64) {
-    if falloff == 0.5 {
-        return (m, v, 1.0);
-    }
-    let s = v.max(0.0).sqrt();
-    if s < 1e-9 {
-        let g = gain(Dual::new(m, DVec2::X), falloff);
-        return (g.v, g.d.x * g.d.x * v.max(0.0), g.d.x);
-    }
-    crate::gaussian::hermite_stein(|x| gain(Dual::constant(x), falloff).v, m, s)
 }
 
 /// Divides the weights by their sum; false (and unchanged) when the sum is not a usable

@@ -310,20 +310,24 @@ fn reference(p: &Params, tex: &RefTexture, tex_coord: [f64; 2]) -> [f64; 4] {
         let cw = mix(1.0, cw, p.falloffcontrast);
         w[k] = cw * weights[k].powf(7.0);
     }
-    let sum: f64 = w.iter().sum();
-    w = w.map(|x| x / sum);
-    let mut a = (colours[0][3] + colours[1][3] + colours[2][3]) / 3.0;
-    if p.falloff != 0.5 {
-        w = w.map(|x| schlick_gain(x, p.falloff));
+    // mx_hextile_compute_blend_weights(cw, weights, falloff), and with cw = 1 for alpha (aw).
+    let blend = |mut w: [f64; 3]| {
         let sum: f64 = w.iter().sum();
         w = w.map(|x| x / sum);
-        a = schlick_gain(a, p.falloff);
-    }
+        if p.falloff != 0.5 {
+            w = w.map(|x| schlick_gain(x, p.falloff));
+            let sum: f64 = w.iter().sum();
+            w = w.map(|x| x / sum);
+        }
+        w
+    };
+    let w = blend(w);
+    let aw = blend(weights.map(|x| x.powf(7.0)));
     let mut out = [0.0; 4];
     for c in 0..3 {
         out[c] = w[0] * colours[0][c] + w[1] * colours[1][c] + w[2] * colours[2][c];
     }
-    out[3] = a;
+    out[3] = aw[0] * colours[0][3] + aw[1] * colours[1][3] + aw[2] * colours[2][3];
     out
 }
 
