@@ -193,6 +193,29 @@ def main():
                 "how": "same shader, vertex inputs i_normal/i_tangent/i_bitangent replaced by constants N=(0,0,1), "
                 "T=(1,0,0), B=(0,1,0): the flat quad with its frame, which TextureBaker itself does not supply",
             }
+        # The quad's one uv stream is i_texcoord_0; a geompropvalue of `uv` reads the attribute
+        # i_geomprop_uv, which TextureBaker leaves unbound (GL's default, 0). The variant binds
+        # the quad's uv stream there, expanded as GL expands a two-component attribute.
+        gp = re.search(r"^in (float|vec2|vec3|vec4) i_geomprop_uv;", vertex, flags=re.M)
+        if gp and re.search(r"^in vec2 i_texcoord_0;", vertex, flags=re.M):
+            expr = {"float": "i_texcoord_0.x", "vec2": "i_texcoord_0", "vec3": "vec3(i_texcoord_0, 0.0)",
+                    "vec4": "vec4(i_texcoord_0, 0.0, 1.0)"}[gp.group(1)]
+            v2 = re.sub(r"^in \w+ i_geomprop_uv;\n", "", vertex, flags=re.M)
+            v2 = re.sub(r"\bvd\.i_geomprop_uv = i_geomprop_uv;", "vd.i_geomprop_uv = %s;" % expr, v2)
+            baker.createProgram({"vertex": v2, "pixel": pixel})
+            udata = capture(baker, w, h, len(names))
+            ubake = "%s/%s__uvgeomprop.exr" % (rel, element.replace("/", "__"))
+            write_exr(os.path.join(REFS, ubake), names, udata)
+            umins, umaxs, unon = stats(udata)
+            record["uv_geomprop_variant"] = {
+                "bake": ubake,
+                "min": umins,
+                "max": umaxs,
+                "nonfinite_texels": unon,
+                "how": "same shader, vertex input i_geomprop_uv replaced by the quad's uv stream i_texcoord_0, "
+                "expanded to the attribute's type as GL does ((u, v, 0, 1)): the quad with a geometric property `uv`, "
+                "which TextureBaker itself does not bind",
+            }
         bakes.append(record)
         print("%s %s" % (element, "uniform" if record["uniform"] else "varies"))
 

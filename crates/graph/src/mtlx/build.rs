@@ -32,6 +32,10 @@ impl<'a, 'i> Importer<'a, 'i> {
                 }
                 let outs: Vec<Option<&'a str>> = match self.resolve_def(scope, el) {
                     Ok(DefKind::Custom(k)) => self.nodedefs[k].outputs.iter().map(|(o, _)| Some(*o)).collect(),
+                    // A node of outputs of several types is a library node per output.
+                    Ok(_) if nodes::flake::CATEGORIES.contains(&self.category(el)) => {
+                        nodes::flake::OUTPUTS.iter().map(|o| Some(*o)).collect()
+                    }
                     Ok(_) => vec![None],
                     Err(Fail::Hard(e)) => return Err(e),
                     Err(Fail::Soft(_)) => continue,
@@ -224,6 +228,9 @@ impl<'a, 'i> Importer<'a, 'i> {
         if let DefKind::Custom(k) = self.resolve_def(scope, el)? {
             return self.instance_output(scope, name, el, k, output, at);
         }
+        if nodes::flake::CATEGORIES.contains(&self.category(el)) {
+            return self.multi_output_node(scope, name, output, at);
+        }
         let src = self.node(scope, name)?;
         match (output, &src) {
             (Some(o), Source::Node { node, channel: None })
@@ -243,9 +250,37 @@ impl<'a, 'i> Importer<'a, 'i> {
         }
     }
 
+    /// Output `output` of a node whose outputs have different types (`flake2d`, `flake3d`):
+    /// tessera's values have one type each, so each output the document connects is a library
+    /// node of its own, `name.output`, with the node's inputs and its output named.
+    fn multi_output_node(
+        &mut self,
+        scope: usize,
+        name: &'a str,
+        output: Option<&'a str>,
+        at: XNode<'a, 'i>,
+    ) -> Result<Source, Fail> {
+        let Some(o) = output.filter(|o| nodes::flake::output_type(o).is_some()) else {
+            let from = qualify(&self.scopes[scope].prefix, at.attribute("name").unwrap_or("?"));
+            let to = format!("{}.{}", qualify(&self.scopes[scope].prefix, name), output.unwrap_or("?"));
+            return Err(self.hard(at, LoadErrorKind::Dangling { from, to }));
+        };
+        self.node_as(scope, name, Some(o))
+    }
+
     /// Creates (once) the library node called `name` in `scope`, and everything upstream of it.
     fn node(&mut self, scope: usize, name: &'a str) -> Result<Source, Fail> {
+        self.node_as(scope, name, None)
+    }
+
+    /// [`Self::node`], for output `output` of a multi-output node (its own library node,
+    /// `name.output`).
+    fn node_as(&mut self, scope: usize, name: &'a str, output: Option<&'a str>) -> Result<Source, Fail> {
         let q = qualify(&self.scopes[scope].prefix, name);
+        let q = match output {
+            Some(o) => format!("{q}.{o}"),
+            None => q,
+        };
         let el = self.scopes[scope].nodes[name];
         match self.state.get(&q) {
             Some(State::Done(s)) => return Ok(s.clone()),
@@ -256,7 +291,7 @@ impl<'a, 'i> Importer<'a, 'i> {
             return Err(Fail::Soft(r.clone()));
         }
         self.state.insert(q.clone(), State::Visiting);
-        let r = self.make_node(scope, &q, el);
+        let r = self.make_node(scope, &q, el, output);
         self.state.remove(&q);
         match r {
             Ok(s) => {
@@ -326,7 +361,7 @@ impl<'a, 'i> Importer<'a, 'i> {
         }
     }
 
-    fn make_node(&mut self, scope: usize, q: &str, el: XNode<'a, 'i>) -> Result<Source, Fail> {
+    fn make_node(&mut self, scope: usize, q: &str, el: XNode<'a, 'i>, output: Option<&str>) -> Result<Source, Fail> {
         let category = self.category(el);
         let tyname = self.type_name(el).unwrap_or("");
         if category == "swizzle" && self.version(el) < (1, 39) {
@@ -439,7 +474,12 @@ impl<'a, 'i> Importer<'a, 'i> {
                 Err(f) => merge_soft(&mut soft, f)?,
             }
         }
-        let ty = if tyname == "multioutput" {
+        if let Some(o) = output {
+            params.push(Param::Str { name: "output".into(), value: o.to_string() });
+        }
+        let ty = if let Some(t) = output.and_then(nodes::flake::output_type) {
+            Some(t)
+        } else if tyname == "multioutput" {
             in_type.or_else(|| {
                 self.inputs_of(el)
                     .into_iter()

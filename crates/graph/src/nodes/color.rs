@@ -177,9 +177,13 @@ pub(crate) fn eval(op: &ColorOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
         ColorOp::Saturate if ins[1].is_uniform() && ins[2].is_uniform() => {
             // Channel k is linear in the colour, `Σⱼ ((1 − s) wⱼ + s δⱼₖ) cⱼ`: summed as such, the
             // channel's own share of the luminance keeps its covariance with the channel.
-            let s = ins[1].ch[0].mean;
+            // The weights in f64, saturated (the overflow rule): a huge amount times huge
+            // coefficients would otherwise make infinite weights of opposite signs, whose sum
+            // is NaN.
+            let s = ins[1].ch[0].mean as f64;
             for k in 0..3 {
-                let w = |j: usize| (1.0 - s) * ins[2].ch[j].mean + if j == k { s } else { 0.0 };
+                let w =
+                    |j: usize| crate::moments::sat((1.0 - s) * ins[2].ch[j].mean as f64 + if j == k { s } else { 0.0 });
                 out.ch[k] = linear(&[w(0), w(1), w(2)], &a.ch[..3], ctx.fp);
             }
         }

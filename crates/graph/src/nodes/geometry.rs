@@ -8,8 +8,8 @@
 //! | `position` | `space` (`object`) | mean `P`, per channel gradient `(∂Pᵢ/∂u, ∂Pᵢ/∂v)` and variance `gᵢᵀ Σ gᵢ` (exact to first order: the 3D footprint `J Σ Jᵀ`) |
 //! | `normal` | `space` (`object`) | mean `N`, gradients from `∂N/∂u`, `∂N/∂v`, variance as `position` |
 //! | `tangent`, `bitangent` | `space` (`object`), `index` (0) | the frame vector at the centre, zero spread (its variation across a footprint is not tracked) |
-//! | `geompropvalue` | `geomprop` (string), `default` (0) | uv sets (`UV0`, `uv`, `st`, `texcoord`, …) as `texcoord`; `P`/`position`/`Pobject`/`Pworld`, `N`/`normal`/…, `tangent`/…, `bitangent`/… (vector3) as those nodes; any other name (or type) gives `default`, with a warning |
-//! | `geomcolor` (float, color3, color4) | `index` (0) | 0, with a warning: tessera's shapes carry no vertex colours |
+//! | `geompropvalue` | `geomprop` (string), `default` (0) | uv sets (`UV0`, `uv`, `st`, `texcoord`, …) as `texcoord`, read as another float type the way GL expands a two-component vertex attribute (`(u, v, 0, 1)`, as many channels as the type has: a float is `u`); `P`/`position`/`Pobject`/`Pworld`, `N`/`normal`/…, `tangent`/…, `bitangent`/… (vector3) as those nodes; any other name (or type) gives `default`, with a warning |
+//! | `geomcolor` (float, color3, color4) | `index` (0) | 0 (alpha 1: opaque black, GL's default vertex attribute (0, 0, 0, 1), which MaterialX's renderers read for a colour set the mesh lacks), with a warning: tessera's shapes carry no vertex colours |
 //! | `constant` | `value` (0) | exact, zero spread |
 //! | `place2d` | `texcoord` (UV0), `pivot` (0,0), `scale` (1,1), `rotate` (0°), `offset` (0,0), `operationorder` (0 = SRT) | affine in `texcoord`: exact when the other inputs are uniform, cubature otherwise |
 //! | `rotate2d` | `in` (0,0), `amount` (0°) | linear: exact for uniform `amount` |
@@ -202,7 +202,7 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
         "geompropvalue" => {
             let name = param(params, "geomprop").unwrap_or("");
             match classify_geomprop(name) {
-                Some(Named::Uv) if matches!(ty, ValueType::Vector2 | ValueType::Vector3) => GeometryOp::PropUv,
+                Some(Named::Uv) if ty != ValueType::Integer && ty != ValueType::Boolean => GeometryOp::PropUv,
                 Some(Named::Prop(p)) if ty == ValueType::Vector3 => GeometryOp::Prop(p),
                 Some(_) => GeometryOp::PropDefault(format!(
                     "geomprop `{name}` cannot be read as a {ty}; the node gives its `default`"
@@ -216,7 +216,7 @@ fn build(category: &str, ty: ValueType, _: &[ValueType], srcs: &[Source], params
         "geomcolor" => {
             let index = constant_index(&srcs[0])?;
             GeometryOp::Absent(format!(
-                "vertex colour set {index} is not carried by tessera's shapes; `geomcolor` gives 0"
+                "vertex colour set {index} is not carried by tessera's shapes; `geomcolor` gives 0 (alpha 1)"
             ))
         }
         "transformmatrix" => {
@@ -321,14 +321,36 @@ fn uniform(ins: &[Filtered], idx: &[usize]) -> bool {
 
 pub(crate) fn eval(op: &GeometryOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
     match op {
-        GeometryOp::Texcoord(_) | GeometryOp::PropUv => {
+        GeometryOp::Texcoord(_) => {
             let mut f = texcoord(ctx);
             f.ty = ty;
             f
         }
+        GeometryOp::PropUv => {
+            // A two-component property read as another type, as GL expands a vertex attribute:
+            // (u, v, 0, 1), as many channels as the type has.
+            let uv = texcoord(ctx);
+            let mut f = Filtered::zero(ty);
+            f.ch[0] = uv.ch[0];
+            if ty.channels() > 1 {
+                f.ch[1] = uv.ch[1];
+            }
+            if ty.channels() == 4 {
+                f.ch[3] = crate::value::Moments::constant(1.0);
+            }
+            f
+        }
         GeometryOp::Prop(p) => geomprop(*p, ctx),
         GeometryOp::PropDefault(_) => ins[0],
-        GeometryOp::Absent(_) => Filtered::zero(ty),
+        GeometryOp::Absent(_) => {
+            // A vertex attribute a mesh does not carry reads as GL's default (0, 0, 0, 1):
+            // an absent colour set is opaque black, as in MaterialX's renderers.
+            let mut v = Filtered::zero(ty);
+            if ty.channels() == 4 {
+                v.ch[3] = crate::value::Moments::constant(1.0);
+            }
+            v
+        }
         GeometryOp::Identity | GeometryOp::Blur(_) => ins[0],
         GeometryOp::TransformNormal => super::math::eval(&super::math::MathOp::Normalize, ty, ins, ctx),
         GeometryOp::Rotate3d => rotate3d(ins, ctx),

@@ -107,3 +107,20 @@ pub fn cell3_float(ix: i32, iy: i32, iz: i32) -> f32 {
 pub fn cell3_vec3(ix: i32, iy: i32, iz: i32, k: i32) -> f32 {
     bits_to_01(hash4(ix, iy, iz, k))
 }
+
+/// Channel `k` of MaterialX `mx_cell_noise_vec3(vec4)` at lattice cell `(ix, iy, iz, iw)`
+/// (five-word seed; the channel offsets `b`).
+#[inline]
+pub fn cell4_vec3(ix: i32, iy: i32, iz: i32, iw: i32, k: u32) -> f32 {
+    let s = seed(5);
+    let (mut a, mut b, mut c) = (s.wrapping_add(ix as u32), s.wrapping_add(iy as u32), s.wrapping_add(iz as u32));
+    bjmix(&mut a, &mut b, &mut c);
+    a = a.wrapping_add(iw as u32);
+    bits_to_01(bjfinal(a, b.wrapping_add(k), c))
+}
+
+/// MaterialX `mx_cell_noise_float(vec4)` at lattice cell `(ix, iy, iz, iw)`.
+#[inline]
+pub fn cell4_float(ix: i32, iy: i32, iz: i32, iw: i32) -> f32 {
+    bits_to_01(hash4(ix, iy, iz, iw))
+}

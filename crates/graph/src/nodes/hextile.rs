@@ -1,5 +1,6 @@
 //! Hex-tiled image lookups: `hextiledimage` (MaterialX 1.39, after Mikkelsen, "Practical
-//! Real-Time Hex-Tiling", JCGT 11(2), 2022).
+//! Real-Time Hex-Tiling", JCGT 11(2), 2022); `hextilednormalmap`, the same tiling of a normal
+//! map, is in [`super::hextile_normal`].
 //!
 //! | input | type | default |
 //! |---|---|---|
@@ -21,20 +22,24 @@
 //! MaterialX's `stdlib_defs.mtlx` (the prose of the Standard Nodes document gives 0 for
 //! `rotation` and `offset`; the nodedefs, which implementations read, give 1).
 //!
-//! **Unfiltered** (MaterialX's `mx_hextiledimage` / `mx_hextile_coord`). With `c = texcoord ·
-//! tiling` and `st = 2√3 c` skewed onto the triangle grid, `k = (st.x − st.y/√3, 2 st.y/√3)`:
+//! **Unfiltered** (MaterialX's `mx_hextiledimage` / `mx_hextile_coord`). With
+//! `c = F(texcoord · tiling)`, `F(x, y) = (x, 1 − y)` (MaterialX's `mx_transform_uv` with
+//! `fileTextureVerticalFlip`, which its renderers and its TextureBaker set: the tiles, their
+//! random maps and the blend live in the v-flipped coordinate, and each lookup point is flipped
+//! back to the image's own v), and `st = 2√3 c` skewed onto the triangle grid, `k = (st.x − st.y/√3, 2 st.y/√3)`:
 //! the cell is `⌊k⌋`, its fractional part `(x, y)`, `z = 1 − x − y`; the triangle is the upper
 //! one when `z ≤ 0`. Its three vertices (`⌊k⌋ + (1,1), (1,0), (0,1)` for the upper triangle,
 //! `⌊k⌋ + (0,0), (0,1), (1,0)` for the lower) carry the barycentric weights, and each vertex is
 //! the centre of a hex tile at `ctr = (i + j/2, (√3/2) j) / (2√3)`. Each tile draws
 //! `r = hash(i + 0.12345, j + 0.12345)` (MaterialX's two-output "hash without sine", evaluated in
 //! `f32` as the shader does) and looks the image up (periodic, bilinear) at
-//! `R(θ)(c − ctr)/σ + ctr + o`, with `θ = mix(rotationrange)(r.x · rotation)` (degrees),
+//! `F(R(θ)(c − ctr)/σ + ctr + o)`, with `θ = mix(rotationrange)(r.x · rotation)` (degrees),
 //! `σ = mix(1, mix(scalerange)(r.y), scale)`, `o = mix(offsetrange)(r · offset)` per axis. The
 //! blend weights are `w ∝ (1 + falloffcontrast (luma(colour) − 1)) · b⁷`, normalised, then, when
 //! `falloff ≠ 0.5`, passed through Schlick's gain with parameter `falloff` (clamped to
-//! [0.001, 0.999]) and normalised again. RGB is `Σ w c`; the alpha of `color4` is the plain
-//! mean of the three alphas (gained when `falloff ≠ 0.5`), as in MaterialX. Where the weights
+//! [0.001, 0.999]) and normalised again. RGB is `Σ w c`; the alpha of `color4` is `Σ aw a`, the
+//! three alphas blended with the weights of luminance factor 1 (`b⁷` normalised, then the gain),
+//! as MaterialX 1.39.5's GLSL and OSL blend it. Where the weights
 //! sum to 0 (black texels with `falloffcontrast = 1`, where MaterialX divides by 0) the
 //! luminance factor is dropped; a tile scale of 0 is taken as ±1e-6.
 //!
@@ -42,7 +47,8 @@
 //! blend (like all filtering) works on linear values; other spaces convert the node's output.
 //!
 //! **Filtered.** The footprint of `texcoord` (its per-channel spreads and the covariance of its
-//! two channels) maps to the coordinate `c` exactly (`T Σ T`, `T = diag(tiling)`); its size is
+//! two channels) maps to the coordinate `c` exactly (`F T Σ T F`, `T = diag(tiling)`, the flip
+//! negating the covariance of the two channels); its size is
 //! `ρ = σ_max(c)/e` in triangle edges `e = 1/(2√3)` (a hex tile spans about 1.15 e).
 //!
 //! - *Lookups.* The centre triangle's three tiles each take `image`'s filtered lookup, centred on
@@ -60,8 +66,8 @@
 //!   take a surrogate lookup: the three's plain mean where the tiles' maps agree, the image's
 //!   mean where they are unrelated, mixed by their coherence (see `Params::coherence`: 1 when
 //!   all ranges have zero width, so that `hextiledimage` is then exactly `tiledimage` at every
-//!   footprint). Alpha (`color4`) is the nodes' mean of the gain of each node's plain
-//!   three-tile mean, over that mean's spread (Gauss–Hermite).
+//!   footprint). Alpha (`color4`) is filtered as the colour, with the weight masses of its own
+//!   weights `aw`.
 //! - *Beyond a tile.* From `ρ = `[`NEAR`] to [`FAR`] the result moves to the surrogate by a
 //!   smoothstep in `log ρ` (the 25-node rule no longer resolves the tiles); from `FAR` on, when
 //!   the tiles are unrelated (or every lookup is blurred past 1.5 image periods), the node
@@ -72,7 +78,9 @@
 //!   gain and the lookups (the first-moment term's own derivative is left out). *Variance*: the
 //!   lookups' spreads combined as fully correlated (`(Σ |W| σ)²`, exact when the tiles' maps
 //!   coincide, an upper bound on independent lookups) plus the weights' linear variation, at
-//!   least `gᵀΣg`; a lookup's spread is its linear part plus, as the footprint grows past a
+//!   least `gᵀΣg`, the weights' part at most a quarter of the squared range of the tiles' values
+//!   (a convex combination's variance: the linearised weights' derivatives grow without bound
+//!   where the luminance factors' sum nears 0); a lookup's spread is its linear part plus, as the footprint grows past a
 //!   texel, the texels' own spread.
 //!
 //! No allocation per evaluation: everything lives on the stack (the lookups reuse `image`'s
@@ -86,7 +94,7 @@ use glam::{DMat2, DVec2, Vec2};
 use std::ops::{Add, Div, Mul, Sub};
 use std::sync::Arc;
 
-pub(crate) const CATEGORIES: &[&str] = &["hextiledimage"];
+pub(crate) const CATEGORIES: &[&str] = &["hextiledimage", "hextilednormalmap"];
 
 /// Footprint size (σ of the coordinate over the triangle edge) up to which the blend weights at
 /// the centre are used unchanged.
@@ -96,22 +104,27 @@ pub const FAR: f64 = 3.0;
 
 /// Lookup spread (σ, image uv) from which a filtered lookup is the image's mean: the periodic
 /// image's first harmonic is damped by `exp(−2π²σ²)` < 1e-19 there.
-const BLURRED: f64 = 1.5;
+pub(super) const BLURRED: f64 = 1.5;
 /// `2√3`: the scale from the coordinate to the triangle grid (whose edge is 1 there).
 const GRID: f64 = 3.464_101_615_137_754_6;
 /// MaterialX's skew constants (`tan 30°`, `2 tan 30°`).
 const TAN30: f64 = 0.577_350_27;
 const TAN30X2: f64 = 1.154_700_54;
 
-/// A `hextiledimage` node: the periodic texture it reads.
+/// A `hextiledimage` or `hextilednormalmap` node: the periodic texture it reads.
 #[derive(Debug)]
 pub struct HexTile {
-    tex: Texture,
+    pub(super) tex: Texture,
+    /// `hextilednormalmap` (see [`super::hextile_normal`]).
+    normal_map: bool,
 }
 
 pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     use Def::*;
     use InType::*;
+    if category == "hextilednormalmap" {
+        return Some(super::hextile_normal::definition());
+    }
     if category != "hextiledimage" {
         return None;
     }
@@ -132,7 +145,13 @@ pub(crate) fn definition(category: &str) -> Option<NodeDef> {
     Some(NodeDef { category: CATEGORIES[0], inputs, params: &["file"], types: types::color, build })
 }
 
-fn build(_: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[Param]) -> Result<Op, String> {
+pub(super) fn build(
+    category: &str,
+    _: ValueType,
+    _: &[ValueType],
+    _: &[Source],
+    params: &[Param],
+) -> Result<Op, String> {
     let file = params.iter().find_map(|p| match p {
         Param::File { name, path, colorspace } if name == "file" => Some((path, colorspace == "srgb_texture")),
         _ => None,
@@ -143,21 +162,22 @@ fn build(_: &str, _: ValueType, _: &[ValueType], _: &[Source], params: &[Param])
     if path.as_os_str().is_empty() {
         return Ok(Op::Default("its `file` is empty: it gives its `default`".into()));
     }
-    Ok(Op::HexTile(Arc::new(HexTile { tex: Texture::periodic(path, srgb)? })))
+    let normal_map = category == "hextilednormalmap";
+    Ok(Op::HexTile(Arc::new(HexTile { tex: Texture::periodic(path, srgb)?, normal_map })))
 }
 
 /// A value and its gradient with respect to the coordinate `c` (forward-mode derivative).
 #[derive(Clone, Copy, Debug, Default)]
-struct Dual {
-    v: f64,
-    d: DVec2,
+pub(super) struct Dual {
+    pub(super) v: f64,
+    pub(super) d: DVec2,
 }
 
 impl Dual {
-    const fn new(v: f64, d: DVec2) -> Dual {
+    pub(super) const fn new(v: f64, d: DVec2) -> Dual {
         Dual { v, d }
     }
-    const fn constant(v: f64) -> Dual {
+    pub(super) const fn constant(v: f64) -> Dual {
         Dual { v, d: DVec2::ZERO }
     }
     fn pow7(self) -> Dual {
@@ -228,12 +248,12 @@ fn gain(x: Dual, r: f64) -> Dual {
 
 /// The three tiles whose blend covers a coordinate: grid vertices and barycentric weights
 /// (with their gradients).
-struct Triangle {
-    ids: [[i32; 2]; 3],
-    bary: [Dual; 3],
+pub(super) struct Triangle {
+    pub(super) ids: [[i32; 2]; 3],
+    pub(super) bary: [Dual; 3],
 }
 
-fn triangle(c: DVec2) -> Triangle {
+pub(super) fn triangle(c: DVec2) -> Triangle {
     let st = c * GRID;
     let k = DVec2::new(st.x - TAN30 * st.y, TAN30X2 * st.y);
     let base = k.floor();
@@ -259,7 +279,7 @@ fn triangle(c: DVec2) -> Triangle {
 }
 
 /// A hex tile's centre in the coordinate `c`.
-fn centre(id: [i32; 2]) -> DVec2 {
+pub(super) fn centre(id: [i32; 2]) -> DVec2 {
     let (i, j) = (id[0] as f64 / GRID, id[1] as f64 / GRID);
     DVec2::new(i + 0.5 * j, j / TAN30X2)
 }
@@ -277,21 +297,21 @@ pub fn mean_weight(rho: f64) -> f64 {
 }
 
 /// Scalar inputs read by their filtered means.
-struct Params {
-    tiling: DVec2,
-    rotation: f64,
-    rotation_range: DVec2,
-    scale: f64,
-    scale_range: DVec2,
-    offset: f64,
-    offset_range: DVec2,
-    falloff: f64,
-    contrast: f64,
-    luma: [f64; 3],
+pub(super) struct Params {
+    pub(super) tiling: DVec2,
+    pub(super) rotation: f64,
+    pub(super) rotation_range: DVec2,
+    pub(super) scale: f64,
+    pub(super) scale_range: DVec2,
+    pub(super) offset: f64,
+    pub(super) offset_range: DVec2,
+    pub(super) falloff: f64,
+    pub(super) contrast: f64,
+    pub(super) luma: [f64; 3],
 }
 
 impl Params {
-    fn read(ins: &[Filtered]) -> Params {
+    pub(super) fn read(ins: &[Filtered]) -> Params {
         let f = |i: usize| ins[i].ch[0].mean as f64;
         let v = |i: usize| DVec2::new(ins[i].ch[0].mean as f64, ins[i].ch[1].mean as f64);
         Params {
@@ -308,11 +328,17 @@ impl Params {
         }
     }
 
-    /// Tile `id`'s linear map `R(θ)/σ` and its translation: the lookup is `L (c − ctr) + ctr + o`.
-    fn tile_map(&self, id: [i32; 2]) -> (DMat2, DVec2) {
+    /// Tile `id`'s random rotation `θ` (radians): `mix(rotationrange)(r.x · rotation)`.
+    pub(super) fn tile_angle(&self, id: [i32; 2]) -> f64 {
         let r = tile_hash(id[0], id[1]);
         let rr = self.rotation_range * (std::f64::consts::PI / 180.0);
-        let theta = rr.x + (rr.y - rr.x) * (r[0] * self.rotation);
+        rr.x + (rr.y - rr.x) * (r[0] * self.rotation)
+    }
+
+    /// Tile `id`'s linear map `R(θ)/σ` and its translation: the lookup is `L (c − ctr) + ctr + o`.
+    pub(super) fn tile_map(&self, id: [i32; 2]) -> (DMat2, DVec2) {
+        let r = tile_hash(id[0], id[1]);
+        let theta = self.tile_angle(id);
         let sr = self.scale_range;
         let s = 1.0 + (sr.x + (sr.y - sr.x) * r[1] - 1.0) * self.scale;
         let s = if s.abs() < 1e-6 { 1e-6f64.copysign(s) } else { s };
@@ -334,12 +360,12 @@ impl Params {
     /// offsets of range width `w`. 1 when every range has zero width (the tiles are one image:
     /// `tiledimage`), 0 when the tiles' scales straddle 0.
     /// The largest tile scale magnitude.
-    fn max_scale(&self) -> f64 {
+    pub(super) fn max_scale(&self) -> f64 {
         let s = |r: f64| (1.0 + (r - 1.0) * self.scale).abs();
         s(self.scale_range.x).max(s(self.scale_range.y))
     }
 
-    fn coherence(&self, lambda: f64) -> f64 {
+    pub(super) fn coherence(&self, lambda: f64) -> f64 {
         let (sa, sb) = (1.0 + (self.scale_range.x - 1.0) * self.scale, 1.0 + (self.scale_range.y - 1.0) * self.scale);
         if sa * sb <= 0.0 {
             return 0.0;
@@ -374,29 +400,63 @@ struct Sample {
     var: [f64; 4],
 }
 
+/// The flip of v, `F(x, y) = (x, 1 − y)`: MaterialX's `mx_transform_uv` with
+/// `fileTextureVerticalFlip`, applied before the hex tiling, and again (as the image's own
+/// orientation) to every lookup.
+pub(super) fn flip(x: DVec2) -> DVec2 {
+    DVec2::new(x.x, 1.0 - x.y)
+}
+
+/// The hex-tiling coordinate of a node and its footprint.
+pub(super) struct Coord {
+    /// `c = F(texcoord · tiling)`.
+    pub(super) c: DVec2,
+    /// Its covariance (`T Σ T` flipped: the covariance of the two channels changes sign).
+    pub(super) cov: DMat2,
+    /// The largest eigenvalue of `cov`.
+    pub(super) lambda: f64,
+    /// The footprint's size in triangle edges (0 at points).
+    pub(super) rho: f64,
+    /// The weight of the far-field surrogate ([`mean_weight`] of `rho`).
+    pub(super) alpha: f64,
+    /// How alike random tiles' lookups are ([`Params::coherence`]; 0 at points).
+    pub(super) kappa: f64,
+}
+
+impl Coord {
+    pub(super) fn of(p: &Params, tc: &Filtered, ctx: &Ctx) -> Coord {
+        let t = p.tiling;
+        let c = flip(DVec2::new(tc.ch[0].mean as f64, tc.ch[1].mean as f64) * t);
+        // The coordinate's covariance: texcoord's (its channels' spreads and their covariance)
+        // scaled by the tiling, the covariance negated by the flip.
+        let cuv = if ctx.point { 0.0 } else { -crate::moments::cov(&tc.ch[0], &tc.ch[1], ctx.fp) as f64 };
+        let cov = DMat2::from_cols(
+            DVec2::new(tc.ch[0].var.max(0.0) as f64 * t.x * t.x, cuv * t.x * t.y),
+            DVec2::new(cuv * t.x * t.y, tc.ch[1].var.max(0.0) as f64 * t.y * t.y),
+        );
+        let (a, b, d) = (cov.x_axis.x, cov.x_axis.y, cov.y_axis.y);
+        let lambda = (0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt()).max(0.0);
+        let rho = if ctx.point { 0.0 } else { lambda.sqrt() * GRID };
+        let alpha = mean_weight(rho);
+        let kappa = if rho > 0.0 { p.coherence(lambda) } else { 0.0 };
+        Coord { c, cov, lambda, rho, alpha, kappa }
+    }
+}
+
 /// `gᵀ C g`.
-fn quad(c: &DMat2, g: DVec2) -> f64 {
+pub(super) fn quad(c: &DMat2, g: DVec2) -> f64 {
     g.dot(*c * g)
 }
 
 pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    if h.normal_map {
+        return super::hextile_normal::eval(h, ins, ctx);
+    }
     let n = ty.channels();
     let p = Params::read(ins);
     let tc = &ins[1];
     let t = p.tiling;
-    let c = DVec2::new(tc.ch[0].mean as f64, tc.ch[1].mean as f64) * t;
-    // The coordinate's covariance: texcoord's (its channels' spreads and their covariance) scaled
-    // by the tiling.
-    let cuv = if ctx.point { 0.0 } else { crate::moments::cov(&tc.ch[0], &tc.ch[1], ctx.fp) as f64 };
-    let cov = DMat2::from_cols(
-        DVec2::new(tc.ch[0].var.max(0.0) as f64 * t.x * t.x, cuv * t.x * t.y),
-        DVec2::new(cuv * t.x * t.y, tc.ch[1].var.max(0.0) as f64 * t.y * t.y),
-    );
-    let (a, b, d) = (cov.x_axis.x, cov.x_axis.y, cov.y_axis.y);
-    let lambda = (0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt()).max(0.0);
-    let rho = if ctx.point { 0.0 } else { lambda.sqrt() * GRID };
-    let alpha = mean_weight(rho);
-    let kappa = if rho > 0.0 { p.coherence(lambda) } else { 0.0 };
+    let Coord { c, cov, lambda, rho, alpha, kappa } = Coord::of(&p, tc, ctx);
     let fc = h.tex.file_channels();
     let (gm, gsq) = h.tex.global_moments();
     // The image's mean and global variance per output channel.
@@ -408,14 +468,10 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
     let mut out = Filtered::zero(ty);
     if alpha >= 1.0 && (kappa < 1e-4 || lambda >= (BLURRED * p.max_scale()).powi(2)) {
         // Much larger than a tile, and the tiles' lookups unrelated or each blurred to the
-        // image's mean: the image's mean (alpha: the gain of the mean of three independent
-        // texels).
+        // image's mean: the image's mean.
         ctx.work.lattice += 1;
         for k in 0..n {
-            let (mut m, mut v) = global(k);
-            if k == 3 {
-                (m, v, _) = alpha_gain(m, v / 3.0, p.falloff);
-            }
+            let (m, v) = global(k);
             out.ch[k] = Moments { mean: m as f32, grad: Vec2::ZERO, var: v as f32 };
         }
         return out;
@@ -428,7 +484,7 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
     for (s, id) in samples.iter_mut().zip(tri.ids) {
         let ctr = centre(id);
         let (l, o) = p.tile_map(id);
-        let at = l * (c - ctr) + ctr + o;
+        let at = flip(l * (c - ctr) + ctr + o);
         let ck = l * cov * l.transpose();
         let sigma = DVec2::new(ck.x_axis.x.max(0.0).sqrt(), ck.y_axis.y.max(0.0).sqrt());
         let [v, sq, du, dv] = image::filtered_rgba(&h.tex, at, sigma, ctx.point);
@@ -436,8 +492,8 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         ctx.work.lattice += 4;
         for k in 0..n {
             let val = image::channel(&v, fc, k);
-            // ∂/∂c = Lᵀ ∂/∂(lookup uv).
-            let g = l.transpose() * DVec2::new(image::channel(&du, fc, k), image::channel(&dv, fc, k));
+            // ∂/∂c = Lᵀ F ∂/∂(lookup uv), F the flip of v.
+            let g = l.transpose() * DVec2::new(image::channel(&du, fc, k), -image::channel(&dv, fc, k));
             s.val[k] = val;
             s.grad[k] = g;
             // Spread over the footprint: the linear part, and, as the footprint grows past a
@@ -465,14 +521,9 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         sur_grad[k] = samples.iter().map(|s| s.grad[k]).sum::<DVec2>() * (kappa / 3.0);
     }
     let cw_far = luma_factor(&sur_val, &sur_grad);
-    // Alpha's inputs: the three lookups' alphas, the other tiles', and its spread.
-    let alpha_in = (n == 4).then(|| {
-        let (gmean, gvar) = global(3);
-        let avg_sd: f64 = samples.iter().map(|s| s.var[3].sqrt()).sum::<f64>() / 3.0;
-        let far_var = kappa * avg_sd * avg_sd + (1.0 - kappa) * gvar / 3.0;
-        (samples.each_ref().map(|s| s.val[3]), sur_val[3], avg_sd * avg_sd, gmean, far_var)
-    });
     let mut m = Masses::default();
+    // Alpha blends with luminance factor 1 (its own weights, `aw`).
+    let mut ma = Masses::default();
     for_footprint_nodes(c, &cov, rho, |x, wt| {
         let at = triangle(x);
         let slot = at.ids.map(|id| tri.ids.iter().position(|t| *t == id));
@@ -495,20 +546,17 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                 }
             }
         }
-        if let Some((a3, a_far, var, ..)) = alpha_in {
-            // Alpha is the plain mean of the node's three tiles (a step across triangle edges).
-            let a_at = |s: Option<usize>| match s {
-                Some(k) => a3[k] + samples[k].grad[3].dot(dx),
-                None => a_far + sur_grad[3].dot(dx),
-            };
-            let mean = slot.iter().map(|s| a_at(*s)).sum::<f64>() / 3.0;
-            let (g, gv, slope) = alpha_gain(mean, var, p.falloff);
-            m.alpha += wt * g;
-            m.alpha2 += wt * (gv + g * g);
-            for sv in slot {
-                match sv {
-                    Some(k) => m.alpha_slope[k] += wt * slope / 3.0,
-                    None => m.alpha_slope_far += wt * slope / 3.0,
+        if n == 4 {
+            for (v, wv) in blend(&p, at.bary, [Dual::constant(1.0); 3]).into_iter().enumerate() {
+                match slot[v] {
+                    Some(k) => {
+                        ma.w[k] = ma.w[k] + wv * wt;
+                        ma.wx[k] += dx * (wv.v * wt);
+                    }
+                    None => {
+                        ma.far = ma.far + wv * wt;
+                        ma.wx_far += dx * (wv.v * wt);
+                    }
                 }
             }
         }
@@ -520,7 +568,9 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
         // else the image's mean.
         let sur = Dual::new(sur_val[k], sur_grad[k]);
         let (val, grad, var);
-        if k < 3 {
+        {
+            // Colour by the luminance-weighted blend, alpha by its own (MaterialX 1.39.5's `aw`).
+            let m = if k < 3 { &m } else { &ma };
             let gvar = global(k).1;
             let sur_var = kappa * avg_sd * avg_sd + (1.0 - kappa) * gvar;
             // The three tiles' and the others' weight masses over the footprint.
@@ -533,25 +583,19 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                 lin += wk.d * s.val[k];
                 sd += wk.v.abs() * s.var[k].sqrt();
             }
-            let var_c = (sd * sd + quad(&cov, lin)).max(quad(&cov, gc));
+            // The blend is a convex combination of the tiles' values: its variation through
+            // the weights alone stays within a quarter of their range squared (the linearised
+            // weights' derivatives grow without bound where the luminance factors' sum nears 0).
+            let (lo, hi) = samples.iter().fold((sur.v, sur.v), |(a, b), s| (a.min(s.val[k]), b.max(s.val[k])));
+            let weights_var = 0.25 * (hi - lo) * (hi - lo);
+            let bound = (sd + weights_var.sqrt()).powi(2);
+            let var_c = (sd * sd + quad(&cov, lin).min(weights_var)).max(quad(&cov, gc).min(bound));
             val = vc + (sur.v - vc) * alpha;
             grad = gc * (1.0 - alpha) + sur.d * alpha;
             var = var_c + (sur_var - var_c) * alpha;
-        } else {
-            let (_, _, _, _, far_var) = alpha_in.expect("four channels");
-            let mut gc = sur.d * m.alpha_slope_far;
-            for (sl, s) in m.alpha_slope.iter().zip(&samples) {
-                gc += s.grad[3] * *sl;
-            }
-            let var_c = (m.alpha2 - m.alpha * m.alpha).max(0.0);
-            // Beyond a tile: the gain of the mean of three other tiles.
-            let (e, ev, slope) = alpha_gain(sur.v, far_var, p.falloff);
-            val = m.alpha + (e - m.alpha) * alpha;
-            grad = gc * (1.0 - alpha) + sur.d * (slope * alpha);
-            var = (var_c + (ev - var_c) * alpha).max(quad(&cov, grad));
         }
-        // Back to uv: c = texcoord · tiling.
-        let g_uv = tc.ch[0].grad * (grad.x * t.x) as f32 + tc.ch[1].grad * (grad.y * t.y) as f32;
+        // Back to uv: c = (u tₓ, 1 − v t_y).
+        let g_uv = tc.ch[0].grad * (grad.x * t.x) as f32 - tc.ch[1].grad * (grad.y * t.y) as f32;
         out.ch[k] = Moments { mean: val as f32, grad: g_uv, var: if ctx.point { 0.0 } else { var.max(0.0) as f32 } };
     }
     out
@@ -560,7 +604,7 @@ pub(crate) fn eval(h: &HexTile, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
 /// MaterialX's blend weights of three tiles with barycentric weights `bary` and luminance
 /// factors `cw`: `cw b⁷` normalised, then the gain, normalised (with their gradients). Where
 /// `cw b⁷` sums to 0 the luminance factors are dropped.
-fn blend(p: &Params, bary: [Dual; 3], cw: [Dual; 3]) -> [Dual; 3] {
+pub(super) fn blend(p: &Params, bary: [Dual; 3], cw: [Dual; 3]) -> [Dual; 3] {
     let mut w = [0, 1, 2].map(|k| cw[k] * bary[k].pow7());
     if !normalise(&mut w) {
         w = bary.map(Dual::pow7);
@@ -579,8 +623,7 @@ fn blend(p: &Params, bary: [Dual; 3], cw: [Dual; 3]) -> [Dual; 3] {
 const CENTRE_ONLY: f64 = 5e-3;
 
 /// What the blend gives each tile over the footprint: the weight masses of the centre
-/// triangle's three tiles and of all others, and alpha's expectation, second moment and its
-/// slopes in each tile's alpha.
+/// triangle's three tiles and of all others, and their first moments.
 #[derive(Default)]
 struct Masses {
     w: [Dual; 3],
@@ -588,17 +631,13 @@ struct Masses {
     /// First moments `E[w (x − c)]`.
     wx: [DVec2; 3],
     wx_far: DVec2,
-    alpha: f64,
-    alpha2: f64,
-    alpha_slope: [f64; 3],
-    alpha_slope_far: f64,
 }
 
 /// Calls `f(x, weight)` for the nodes of a cubature over the footprint `N(c, cov)`: 5 × 5
 /// Gauss–Hermite along a factor of `cov`, or the centre alone while the footprint is small
 /// against a tile (`ρ` below [`CENTRE_ONLY`]). The blend weights are evaluated there, never the
 /// image.
-fn for_footprint_nodes(c: DVec2, cov: &DMat2, rho: f64, mut f: impl FnMut(DVec2, f64)) {
+pub(super) fn for_footprint_nodes(c: DVec2, cov: &DMat2, rho: f64, mut f: impl FnMut(DVec2, f64)) {
     if rho < CENTRE_ONLY {
         return f(c, 1.0);
     }
@@ -611,7 +650,7 @@ fn for_footprint_nodes(c: DVec2, cov: &DMat2, rho: f64, mut f: impl FnMut(DVec2,
 }
 
 /// A factor `L` of a covariance, `L Lᵀ = C` (Cholesky; degenerate covariances allowed).
-fn factor(c: &DMat2) -> DMat2 {
+pub(super) fn factor(c: &DMat2) -> DMat2 {
     let (a, b, d) = (c.x_axis.x.max(0.0), c.x_axis.y, c.y_axis.y.max(0.0));
     if a <= 1e-300 {
         return DMat2::from_cols(DVec2::ZERO, DVec2::new(0.0, d.sqrt()));
@@ -619,20 +658,6 @@ fn factor(c: &DMat2) -> DMat2 {
     let l11 = a.sqrt();
     let l21 = b / l11;
     DMat2::from_cols(DVec2::new(l11, l21), DVec2::new(0.0, (d - l21 * l21).max(0.0).sqrt()))
-}
-
-/// Alpha's gain (identity when `falloff = 0.5`) of a value spread as `N(m, v)`: its expectation
-/// and variance (5-point Gauss–Hermite) and the slope of the expectation in `m` (Stein).
-fn alpha_gain(m: f64, v: f64, falloff: f64) -> (f64, f64, f64) {
-    if falloff == 0.5 {
-        return (m, v, 1.0);
-    }
-    let s = v.max(0.0).sqrt();
-    if s < 1e-9 {
-        let g = gain(Dual::new(m, DVec2::X), falloff);
-        return (g.v, g.d.x * g.d.x * v.max(0.0), g.d.x);
-    }
-    crate::gaussian::hermite_stein(|x| gain(Dual::constant(x), falloff).v, m, s)
 }
 
 /// Divides the weights by their sum; false (and unchanged) when the sum is not a usable

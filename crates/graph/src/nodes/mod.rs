@@ -8,9 +8,11 @@
 pub(crate) mod channel;
 pub(crate) mod color;
 pub(crate) mod composite;
+pub(crate) mod flake;
 pub(crate) mod geometry;
 pub(crate) mod hash;
 pub(crate) mod hextile;
+pub(crate) mod hextile_normal;
 pub(crate) mod image;
 pub(crate) mod kernel_table;
 pub(crate) mod math;
@@ -267,7 +269,9 @@ pub enum Op {
     LatLong(Arc<image::Texture>),
     /// `triplanarprojection`.
     Triplanar(Arc<image::Triplanar>),
-    /// `hextiledimage`.
+    /// `flake2d`, `flake3d` (one node per output).
+    Flake(flake::FlakeOp),
+    /// `hextiledimage`, `hextilednormalmap`.
     HexTile(Arc<hextile::HexTile>),
     /// A node that evaluates its `default` input (its first), as MaterialX's image nodes do
     /// when their `file` is empty; the text says why, as a load warning.
@@ -305,6 +309,7 @@ pub(crate) fn eval_into(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx,
         Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
         Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
         Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
+        Op::Flake(f) => flake::eval(f, ty, ins, ctx),
         Op::Normal(n) => normal::eval(n, ty, ins, ctx),
         Op::Default(_) => ins[0],
     };
@@ -372,6 +377,7 @@ pub fn supported() -> Vec<&'static str> {
         image::CATEGORIES,
         hextile::CATEGORIES,
         normal::CATEGORIES,
+        flake::CATEGORIES,
     ] {
         v.extend_from_slice(f);
     }
@@ -406,6 +412,7 @@ pub fn definition(category: &str) -> Option<NodeDef> {
         .or_else(|| image::definition(category))
         .or_else(|| hextile::definition(category))
         .or_else(|| normal::definition(category))
+        .or_else(|| flake::definition(category))
 }
 
 /// Input names of a category (empty if unknown).

@@ -10,6 +10,7 @@ mod demo_graphs;
 mod errors;
 mod filter;
 mod finite;
+mod flake;
 mod geometry;
 mod hextile;
 mod logic;

@@ -486,6 +486,18 @@ fn regressions_found_by_the_fuzzer() {
     let uv = || Source::Texcoord;
     type Case = (&'static str, &'static str, T, Vec<(&'static str, Source)>, Vec2);
     let cases: Vec<Case> = vec![
+        // A huge amount times huge luminance coefficients: infinite weights of both signs.
+        (
+            "saturate of a huge amount and coefficients",
+            "saturate",
+            T::Color4,
+            vec![
+                ("in", c(T::Color4, &[0.0577, 0.0577, 0.0577, 0.0577])),
+                ("amount", c(T::Float, &[3.4e38])),
+                ("lumacoeffs", c(T::Color3, &[-4.8e13, 6.95e6, 6.95e6])),
+            ],
+            Vec2::new(0.3, 0.4),
+        ),
         // 0 · ∞ in exp's variance and gradient.
         ("exp overflow", "exp", T::Vector2, vec![("in", c(T::Vector2, &[1e6, -1e6]))], Vec2::new(0.3, 0.4)),
         ("exp of a huge uv", "exp", T::Vector2, vec![("in", uv())], Vec2::new(1.5, 2.8)),
@@ -626,5 +638,20 @@ fn regressions_found_by_the_fuzzer() {
     for (p, inside) in [(Vec2::new(0.6, 0.5), 1.0), (Vec2::new(0.8, 0.5), 0.0)] {
         assert_eq!(g.eval_output(out, &Footprint::point(p), &mut scratch).ch[0].mean, inside, "{p}");
         assert!((g.eval_output(out, &Footprint::isotropic(p, 1e-3), &mut scratch).ch[0].mean - inside).abs() < 1e-3);
+    }
+}
+
+/// The fuzzer really builds the nodes that need more than wiring: those given a file
+/// (`fuzz::WITH_FILE`) and the multi-output flakes (their output chosen by type).
+#[test]
+fn file_and_multi_output_nodes_are_drawn() {
+    let mut rng = Rng(0x5eed_f11e);
+    let mut listings = String::new();
+    for _ in 0..400 {
+        let size = 2 + (rng.next_u64() % 39) as usize;
+        listings += &fuzz::random_graph(&mut rng, size, false).listing;
+    }
+    for cat in fuzz::WITH_FILE.iter().chain(&["flake2d", "flake3d"]) {
+        assert!(listings.contains(&format!(" = {cat}<")), "`{cat}` is never built");
     }
 }

@@ -20,6 +20,12 @@
 //!   still discriminates, the same bake with v flipped must fail it wherever the reference is
 //!   not itself nearly symmetric in v.
 //!
+//! Two stated exceptions, each a property of MaterialX's GPU renderer rather than of the node:
+//! bakes whose output is an `asin` or `acos` node take [`GPU_ASIN_ABS`] in place of the analytic
+//! tolerance (the error Mesa documents for its `asin`), and the edge texels of `splitlr` and
+//! `splittb` bakes are compared with MaterialX's screen-space `mx_aastep` applied to tessera's
+//! values of the node's inputs ([`aastep_texels`]).
+//!
 //! Texels where MaterialX's value is NaN (undefined) are not compared. Where an entry has a
 //! `flat_plane_variant` (the baker's quad with normal +z, tangent +x supplied), that bake is the
 //! reference: it is the geometry `graph::Footprint` gives geometry nodes.
@@ -43,76 +49,137 @@ const IMAGE_MAX: f32 = 0.2;
 const IMAGE_MEAN: f32 = 0.025;
 /// Fraction of the values of an image-based bake allowed beyond `IMAGE_MAX · R`.
 const IMAGE_OUTLIERS: f32 = 0.001;
+/// Mesa's documented worst-case absolute error of its GLSL `asin` (a polynomial in `√(1 − |x|)`:
+/// 0.00039, Mesa commit "glsl: improve the accuracy of the asin() builtin function"), which
+/// llvmpipe runs (Mesa's NIR `build_asin` keeps that polynomial, coefficients 0.086566724 and
+/// −0.03102955), and of `acos` (π/2 minus the same polynomial form with its own coefficients).
+/// Vulkan 1.0's precision appendix leaves the
+/// trigonometric functions' precision undefined; a ULP bound from a later table was not confirmed
+/// in the sources searched, so the rule rests on Mesa's own figure, which the measured errors
+/// (3.88e-4 for asin, 1.6e-4 for acos) stay within.
+/// Bakes whose output is an `asin` or `acos` node are compared with this absolute tolerance in
+/// place of [`ANALYTIC_TOL`]; nothing else is.
+const GPU_ASIN_ABS: f32 = 3.9e-4;
+
+/// Whether a bake's output is an `asin` or `acos` node, compared with [`GPU_ASIN_ABS`]: own
+/// references by their nodedef, the shared suite's by its trig document's graphs.
+fn inverse_trig(nodedef: Option<&str>, doc: &str, element: &str) -> bool {
+    match nodedef {
+        Some(nd) => nd.starts_with("ND_asin_") || nd.starts_with("ND_acos_"),
+        None => doc.ends_with("math/trig.mtlx") && (element.starts_with("asin_") || element.starts_with("acos_")),
+    }
+}
+
+/// MaterialX's GLSL `splitlr`/`splittb` choose their side with `mx_aastep(center, x)`:
+/// `smoothstep(c − a, c + a, x)` with `a = 0.7071 · |(dFdx x, dFdy x)|`, a screen-space
+/// anti-aliasing of the edge over about a pixel of the bake, which a point evaluation (and
+/// tessera's footprint filtering, whose footprint is not the bake's pixel) does not reproduce.
+/// For a bake whose output is such a node, the texels where that smoothstep is strictly
+/// between 0 and 1 (within `a` of the edge: one or two per row or column) are compared with
+/// MaterialX's formula applied to tessera's own values of the node's inputs (`valuel`, `valuer`
+/// or `valuet`, `valueb`, `center`, `texcoord`) and of the pixel derivatives of `texcoord`
+/// (GL's fine derivatives: differences within the 2 × 2 pixel quads); every other texel is
+/// compared with tessera's node itself. Returns the emulated texels (index, values) or `None`
+/// when the output is not a split node.
+fn aastep_texels(doc: &Document, element: &str, w: usize, h: usize) -> Option<Vec<(usize, Vec<f32>)>> {
+    use graph::{BakeSource, EvalScratch, Footprint, NoOverride, Source};
+    let (BakeSource::Output(out), _) = bake::resolve(doc, element).ok()? else { return None };
+    let g = doc.graph();
+    let Source::Node { node, channel: None } = g.output(out).source else { return None };
+    let lr = match g.node_category(node) {
+        "splitlr" => true,
+        "splittb" => false,
+        _ => return None,
+    };
+    let inputs = g.node_inputs(node);
+    let src = |name: &str| inputs.iter().find(|(n, _)| *n == name).map(|(_, s)| (*s).clone());
+    let (first, second) = if lr { ("valuel", "valuer") } else { ("valueb", "valuet") };
+    let (a, b, c, t) = (src(first)?, src(second)?, src("center")?, src("texcoord")?);
+    let n = g.node_type(node).channels();
+    let mut scratch = EvalScratch::new(g);
+    let mut value = |s: &Source, i: usize, j: usize| -> Option<Vec<f32>> {
+        let uv = glam::Vec2::new((i as f32 + 0.5) / w as f32, 1.0 - (j as f32 + 0.5) / h as f32);
+        let fp = Footprint::point(uv);
+        Some(match s {
+            Source::Constant(v) => v.channels().to_vec(),
+            Source::Texcoord => vec![uv.x, uv.y],
+            Source::Node { node, channel } => {
+                let f = g.eval_node_direct(*node, &fp, &mut scratch, &NoOverride);
+                match channel {
+                    Some(k) => vec![f.ch[*k as usize].mean],
+                    None => f.ch[..f.ty.channels()].iter().map(|m| m.mean).collect(),
+                }
+            }
+            Source::Geometry(_) => return None,
+        })
+    };
+    let axis = if lr { 0 } else { 1 };
+    let mut x = vec![0.0f32; w * h];
+    for j in 0..h {
+        for i in 0..w {
+            x[j * w + i] = value(&t, i, j)?[axis];
+        }
+    }
+    let mut texels = Vec::new();
+    for j in 0..h {
+        for i in 0..w {
+            // Fine derivatives within the 2 × 2 quad (rows pair up from the bottom: GL's y).
+            let dx = x[j * w + (i | 1).min(w - 1)] - x[j * w + (i & !1)];
+            let r = h - 1 - j;
+            let row = |r: usize| h - 1 - r.min(h - 1);
+            let dy = x[row(r | 1) * w + i] - x[row(r & !1) * w + i];
+            let afwidth = (dx * dx + dy * dy).sqrt() * std::f32::consts::FRAC_1_SQRT_2;
+            let centre = value(&c, i, j)?[0];
+            let (e0, e1) = (centre - afwidth, centre + afwidth);
+            if e1 <= e0 {
+                continue;
+            }
+            let s = ((x[j * w + i] - e0) / (e1 - e0)).clamp(0.0, 1.0);
+            if s <= 0.0 || s >= 1.0 {
+                continue;
+            }
+            let s = s * s * (3.0 - 2.0 * s);
+            let (va, vb) = (value(&a, i, j)?, value(&b, i, j)?);
+            let at = |v: &[f32], k: usize| if v.len() == 1 { v[0] } else { v[k] };
+            texels.push((j * w + i, (0..n).map(|k| at(&va, k) + (at(&vb, k) - at(&va, k)) * s).collect()));
+        }
+    }
+    Some(texels)
+}
+
 /// Bakes that pass today: a regression floor on top of the per-bake check against the table.
-const MIN_PASS: usize = 248;
+const MIN_PASS: usize = 267;
 /// The same floor for tessera's own references (`tests/mtlx-refs`).
-const MIN_OWN_PASS: usize = 635;
+const MIN_OWN_PASS: usize = 682;
 
 /// Explanations of known differences, appended to failures: (document suffix, element prefix,
 /// note).
-const NOTES: &[(&str, &str, &str)] = &[
-    (
-        "texture/split.mtlx",
-        "",
-        "MaterialX anti-aliases the split edge (aastep: a smoothstep over ±0.71 pixel of fwidth), so the edge texels \
-         differ from a point evaluation",
-    ),
-    (
-        "convolution/heighttonormal.mtlx",
-        "",
-        "MaterialX differentiates the minified image across one pixel of its bake (dFdx/dFdy), so its normals \
+const NOTES: &[(&str, &str, &str)] = &[(
+    "convolution/heighttonormal.mtlx",
+    "",
+    "MaterialX differentiates the minified image across one pixel of its bake (dFdx/dFdy), so its normals \
          depend on the bake resolution; ours are the slope of the filtered height",
-    ),
-    ("math/trig.mtlx", "asin_nodegraph", "the GPU's asin(0.5) is 2.1e-4 below π/6 = 0.5235988, which ours gives"),
-];
+)];
 
 /// Explanations of known differences from tessera's own references (`tests/mtlx-refs`).
 const OWN_NOTES: &[(&str, &str, &str)] = &[
     (
-        "docs/asin.mtlx",
-        "",
-        "llvmpipe's asin is up to 3.9e-4 off near ±1 (asin(−0.9296) = −1.193281, which ours gives; the GPU says \
-         −1.193669), as the shared suite's asin(0.5) is",
-    ),
-    (
-        "docs/acos.mtlx",
-        "",
-        "llvmpipe's acos is up to 1.6e-4 off (its asin, shifted by π/2); ours is the f32 libm value",
-    ),
-    (
-        "docs/fractal2d.mtlx",
-        "",
-        "the failing channels are those MaterialX computes at an offset lattice (the second of vector2, the fourth of \
-         vector4/color4: p + (19, 193)); MaterialX's float fractal2d at p + (19, 193) equals that channel exactly and \
-         differs from tessera's float fractal2d there by the same 2.3e-4 at 9 texels: single-precision rounding at \
-         octave coordinates of about 10³ (a float's last bit is 6e-5 there), not the vector code",
-    ),
-    ("docs/fractal3d.mtlx", "", "as fractal2d: the offset channel, evaluated at coordinates of about 10³"),
-    (
-        "docs/geompropvalue.mtlx",
-        "",
-        "geometry: the baker's quad has no geometric property `uv` (its uv stream is `texcoord_0`), so its unbound \
-         attribute reads 0; tessera answers `uv` with the surface's uv",
-    ),
-    (
         "docs/hextiledimage.mtlx",
         "",
-        "MaterialX's GLSL flips v (mx_transform_uv_vflip, as its renderers set fileTextureVerticalFlip) before it \
-         hex-tiles, so its tiles and their random rotations, scales and offsets are those of (u, 1 − v); with the \
-         per-tile randomisation off the two agree to a mean error of 0.004",
+        "after placing the tiles in MaterialX's v-flipped coordinate (mx_transform_uv_vflip before the hex \
+         tiling, as its renderers and TextureBaker set fileTextureVerticalFlip) the mean error fell from 0.28 to \
+         0.066 and the values beyond 0.2 R from 1026 to 129. What is left is not explained: it appears as soon as \
+         any one of the per-tile rotation, scale or offset is on (with all three off the two agree to a mean \
+         error of 0.004), it does not depend on the image's address mode, and much of it sits in 2 × 2-pixel \
+         blocks, the GPU's shading quads, which points at llvmpipe's texture LOD per quad (not verified); the \
+         unfiltered node matches a transcription of the GLSL to 1e-4 (crates/graph/tests/verify/hextile.rs)",
     ),
     (
-        "docs/splitlr.mtlx",
+        "docs/hextilednormalmap.mtlx",
         "",
-        "MaterialX anti-aliases the split edge (aastep: a smoothstep over ±0.71 pixel of fwidth), so the edge texels \
-         differ from a point evaluation",
-    ),
-    ("docs/splittb.mtlx", "", "as splitlr: MaterialX's aastep smooths the edge over about a pixel"),
-    (
-        "docs/geomcolor.mtlx",
-        "geomcolor_color4",
-        "geometry: the baker binds no colour stream, and GL's default vertex attribute is (0, 0, 0, 1), so its alpha \
-         is 1; tessera's surfaces carry no vertex colour and geomcolor gives 0 in every channel",
+        "5 of 1728 values (two texels at u ≈ 0.94–0.98, v ≈ 0.06) are beyond 0.2 R, a fraction 0.0029 where the \
+         image bound allows 0.001; the mean error (0.0009) is a third of its bound. Not yet explained; the unfiltered node matches a \
+         transcription of MaterialX's GLSL to 1e-4 (crates/graph/tests/verify/hextile.rs)",
     ),
     (
         "docs/image.mtlx",
@@ -125,7 +192,11 @@ const OWN_NOTES: &[(&str, &str, &str)] = &[
 
 #[derive(Clone, Debug)]
 enum Outcome {
-    Pass { max_err: f32 },
+    /// Passed, with the largest error and, where a stated rule applied, what it did.
+    Pass {
+        max_err: f32,
+        note: Option<String>,
+    },
     Fail(String),
     Unsupported(String),
 }
@@ -158,6 +229,17 @@ fn previous_passes(text: &str) -> Vec<(String, String)> {
 
 /// Compares a bake with the reference EXR.
 fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String], textured: bool) -> Outcome {
+    compare_with(baked, reference, names, textured, ANALYTIC_TOL)
+}
+
+/// [`compare`], analytic bakes with absolute tolerance `abs_tol` (relative beyond magnitude 1).
+fn compare_with(
+    baked: &graph::BakedImage,
+    reference: &common::Exr,
+    names: &[String],
+    textured: bool,
+    abs_tol: f32,
+) -> Outcome {
     let (w, h) = (baked.width as usize, baked.height as usize);
     if reference.width != w || reference.height != h {
         return Outcome::Fail(format!("reference is {}x{}, bake {w}x{h}", reference.width, reference.height));
@@ -187,7 +269,7 @@ fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String],
                 let e = if got.is_finite() { (got - want).abs() } else { f32::INFINITY };
                 count += 1;
                 sum += e as f64;
-                let tol = if textured { IMAGE_MAX * range } else { ANALYTIC_TOL * want.abs().max(1.0) };
+                let tol = if textured { IMAGE_MAX * range } else { abs_tol * want.abs().max(1.0) };
                 if e > tol {
                     off += 1;
                     cols = (cols.0.min(i), cols.1.max(i));
@@ -206,7 +288,7 @@ fn compare(baked: &graph::BakedImage, reference: &common::Exr, names: &[String],
     let ok =
         if textured { off as f32 <= IMAGE_OUTLIERS * count as f32 && mean <= IMAGE_MEAN * range } else { off == 0 };
     if ok {
-        return Outcome::Pass { max_err: worst.0 };
+        return Outcome::Pass { max_err: worst.0, note: None };
     }
     let (e, i, j, k, got, want) = worst;
     let mut s = format!(
@@ -281,10 +363,10 @@ fn run(set: &RefSet) -> Run {
         let outcome = match doc {
             Err(e) => Outcome::Fail(format!("document does not load: {e}")),
             Ok(doc) => {
-                let reference = match b["flat_plane_variant"]["bake"].as_str() {
-                    Some(flat) => flat,
-                    None => b["bake"].as_str().unwrap(),
-                };
+                // Where the baker's quad lacks what the shader reads, a variant supplies it: the
+                // flat frame, or its uv stream as the geometric property `uv`.
+                let variant = b["flat_plane_variant"]["bake"].as_str().or(b["uv_geomprop_variant"]["bake"].as_str());
+                let reference = variant.unwrap_or_else(|| b["bake"].as_str().unwrap());
                 let img = common::read_exr(&root.join(reference));
                 let textured = b.get("texture_files").is_some_and(|v| v.as_array().is_some_and(|a| !a.is_empty()));
                 let settings = BakeSettings {
@@ -296,7 +378,25 @@ fn run(set: &RefSet) -> Run {
                     b["channels"].as_array().unwrap().iter().map(|c| c.as_str().unwrap().to_string()).collect();
                 match bake::bake_element(doc, &element, &settings) {
                     Ok(baked) => {
-                        let outcome = compare(&baked, &img, &names, textured);
+                        let trig = inverse_trig(b["nodedef"].as_str(), &doc_path, &element);
+                        let tol = if trig { GPU_ASIN_ABS } else { ANALYTIC_TOL };
+                        let aa = if textured { None } else { aastep_texels(doc, &element, img.width, img.height) };
+                        let mut outcome = match &aa {
+                            Some(texels) => {
+                                let mut emulated = baked.clone();
+                                let n = emulated.channels();
+                                for (t, v) in texels {
+                                    for (k, x) in v.iter().enumerate().take(n) {
+                                        emulated.data[t * n + k] = *x;
+                                    }
+                                }
+                                compare_with(&emulated, &img, &names, textured, tol)
+                            }
+                            None => compare_with(&baked, &img, &names, textured, tol),
+                        };
+                        if let (Some(texels), Outcome::Pass { note, .. }) = (&aa, &mut outcome) {
+                            *note = Some(format!("{} edge texels compared with MaterialX's aastep", texels.len()));
+                        }
                         if textured && matches!(outcome, Outcome::Pass { .. }) {
                             // The bound must still tell a v-flipped bake from the right one,
                             // unless the reference itself is nearly symmetric in v.
@@ -371,7 +471,8 @@ fn section(md: &mut String, what: &str, groups: &BTreeMap<String, [usize; 4]>, r
         let _ = writeln!(md, "\n### `{d}`\n\n| element | result | detail |\n|---|---|---|");
         for r in rs {
             let (what, detail) = match &r.outcome {
-                Outcome::Pass { max_err } => ("pass", format!("max error {max_err:.1e}")),
+                Outcome::Pass { max_err, note: None } => ("pass", format!("max error {max_err:.1e}")),
+                Outcome::Pass { max_err, note: Some(n) } => ("pass", format!("max error {max_err:.1e} ({n})")),
                 Outcome::Fail(s) => ("fail", s.clone()),
                 Outcome::Unsupported(s) => ("unsupported", s.clone()),
             };
@@ -417,6 +518,27 @@ fn materialx_conformance() {
          range R (at least 0.05): mean error at most {IMAGE_MEAN} R, and at most a fraction {IMAGE_OUTLIERS} of \
          the values beyond {IMAGE_MAX} R (GL's trilinear mip-mapping against exact Gaussian filtering; the \
          same bound rejects v-flipped bakes). Texels MaterialX leaves undefined (NaN) are skipped.\n"
+    );
+    let _ = writeln!(
+        md,
+        "One stated exception: bakes whose output is an `asin` or `acos` node (nodedefs `ND_asin_*`, `ND_acos_*`; \
+         the shared suite's `asin_*`/`acos_*` graphs of `math/trig.mtlx`) are compared with the absolute tolerance \
+         {GPU_ASIN_ABS:e} in place of {ANALYTIC_TOL:e}: Mesa's documented worst-case absolute error of the GLSL \
+         `asin` it compiles for llvmpipe (a polynomial in √(1 − |x|): 0.00039, Mesa commit \"glsl: improve the \
+         accuracy of the asin() builtin function\"; its NIR `build_asin` keeps the polynomial, and `acos` is π/2 \
+         minus one of the same form). GLSL's and Vulkan 1.0's precision \
+         tables leave the inverse trigonometric functions undefined; no other function is given more than \
+         {ANALYTIC_TOL:e}.\n"
+    );
+    let _ = writeln!(
+        md,
+        "A second: `splitlr` and `splittb` in MaterialX's GLSL anti-alias their edge in screen space \
+         (`mx_aastep`: `smoothstep(c − a, c + a, x)`, `a` = 0.7071 × the length of the pixel derivatives of the \
+         coordinate), about one pixel of the bake wide, which no point evaluation reproduces. For a bake whose \
+         output is such a node, the texels where that smoothstep is strictly between 0 and 1 are compared with \
+         MaterialX's formula applied to tessera's own values of the node's inputs and of the coordinate's \
+         derivatives within GL's 2 × 2 pixel quads; all other texels with tessera's node itself, both within \
+         {ANALYTIC_TOL:e}. The table says how many texels each such bake had at its edge.\n"
     );
     let _ = writeln!(
         md,

@@ -14,7 +14,6 @@ use graph::{Graph, GraphBuilder, Source, Value, ValueType};
 pub const EXCLUDED: &[(&str, &str)] = &[
     ("image", "needs a file"),
     ("tiledimage", "needs a file"),
-    ("hextiledimage", "needs a file"),
     ("latlongimage", "needs a file"),
     ("triplanarprojection", "needs a file"),
     ("creatematrix", "matrices are folded at load, not evaluated"),
@@ -24,6 +23,31 @@ pub const EXCLUDED: &[(&str, &str)] = &[
     ("frame", "folded to a constant by the MaterialX reader"),
     ("time", "folded to a constant by the MaterialX reader"),
 ];
+
+/// Categories drawn with an image file: a small test texture ([`texture`]) as their `file`.
+pub const WITH_FILE: &[&str] = &["hextiledimage", "hextilednormalmap"];
+
+/// An 8 × 8 RGBA PNG of varied texels (black ones among them), written once.
+pub fn texture() -> std::path::PathBuf {
+    static PATH: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("graph-fuzz-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("texture.png");
+        let img = image::RgbaImage::from_fn(8, 8, |x, y| {
+            let k = (x * 37 + y * 91) % 251;
+            let c = if (x + y) % 5 == 0 {
+                [0, 0, 0, 255]
+            } else {
+                [k as u8, (k * 7 % 256) as u8, (255 - k) as u8, (k * 3 % 256) as u8]
+            };
+            image::Rgba(c)
+        });
+        img.save(&path).unwrap();
+        path
+    })
+    .clone()
+}
 
 /// Categories whose unfiltered function is continuous in every input (for any constants): their
 /// filtered mean is compared with brute-force supersampling.
@@ -218,7 +242,12 @@ pub fn random_graph(rng: &mut Rng, size: usize, continuous_only: bool) -> Random
             }
         }
         let name = format!("n{}", made.len());
-        if let Ok(id) = b.add_node(&name, cat, ty, &inputs, Vec::new()) {
+        let params = if WITH_FILE.contains(&cat) {
+            vec![nodes::Param::File { name: "file".into(), path: texture(), colorspace: String::new() }]
+        } else {
+            Vec::new()
+        };
+        if let Ok(id) = b.add_node(&name, cat, ty, &inputs, params) {
             listing += &format!("{name} = {cat}<{ty}>(");
             for (k, (iname, s)) in inputs.iter().enumerate() {
                 let s = match s {
