@@ -135,8 +135,6 @@ pub struct TextureEvaluator<S> {
     tmp: Vec<Filtered>,
     /// The current pixel's first-hit textures, shared by its samples.
     first_hits: FirstHits,
-    /// Whether the last [`Self::evaluate`] met a non-finite graph value.
-    last_nonfinite: bool,
     /// How requests are served.
     pub source: S,
 }
@@ -197,7 +195,6 @@ impl<S: GraphSource> TextureEvaluator<S> {
                     .map(|_| FirstHit { shape: u32::MAX, centre: None, outputs: vec![zero; slots] })
                     .collect(),
             },
-            last_nonfinite: false,
             source,
         }
     }
@@ -254,10 +251,10 @@ impl<S: GraphSource> TextureEvaluator<S> {
                 return None;
             }
             self.source.shared(true);
-            self.evaluate(graphs, material, &fp);
+            let finite = self.evaluate_outputs(graphs, material, &fp);
             evaluated = true;
             self.source.shared(false);
-            (!self.last_nonfinite).then(|| (fp.uv.as_dvec2(), cov, cov.inverse()))
+            finite.then(|| (fp.uv.as_dvec2(), cov, cov.inverse()))
         });
         let e = &mut self.first_hits.entries[k];
         e.shape = shape;
@@ -288,14 +285,21 @@ impl<S: GraphSource> TextureEvaluator<S> {
     /// Evaluates `material`'s graph outputs at footprint `fp`; returns them by slot.
     #[inline]
     pub fn evaluate(&mut self, graphs: &[SceneGraph], material: &Material, fp: &Footprint) -> &[Filtered] {
-        self.last_nonfinite = false;
+        self.evaluate_outputs(graphs, material, fp);
+        &self.outputs[..material.slot_count as usize]
+    }
+
+    /// [`Self::evaluate`] into the output slots; false if a graph value went non-finite.
+    #[inline]
+    fn evaluate_outputs(&mut self, graphs: &[SceneGraph], material: &Material, fp: &Footprint) -> bool {
+        let mut finite = true;
         for mg in &material.graphs {
             let g = graphs[mg.graph as usize].graph();
             let n = mg.slots.len();
             let scratch = &mut self.scratches[mg.graph as usize];
             self.source.evaluate(g, mg, fp, scratch, &mut self.tmp[..n]);
             if let Some(at) = scratch.take_nonfinite() {
-                self.last_nonfinite = true;
+                finite = false;
                 if self.sample_origin.is_none() {
                     self.sample_origin = Some(GraphNonFinite {
                         material: material.name.clone(),
@@ -309,7 +313,7 @@ impl<S: GraphSource> TextureEvaluator<S> {
                 self.outputs[slot as usize] = self.tmp[k];
             }
         }
-        &self.outputs[..material.slot_count as usize]
+        finite
     }
 
     /// Starts camera sample `index`: forgets the previous sample's non-finite origin.

@@ -250,8 +250,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         } else {
             let fp = match &tf.vertex {
                 Some(v) => {
-                    let cov = footprint::uv_covariance(tf.var, v).as_mat2() * self.settings.filter_scale_squared();
-                    let mut fp = si.graph_footprint(cov);
+                    let mut fp = self.graph_footprint(si, v, tf.var);
                     fp.uv += tf.shift.uv;
                     fp.geom.p += tf.shift.p;
                     fp
@@ -296,9 +295,14 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         let si = interaction(&scene.shapes, &cam.ray, &hit);
         let v = si.footprint_vertex();
         let (_, var) = PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, self.settings.spp);
-        let cov = footprint::uv_covariance(var, &v).as_mat2() * self.settings.filter_scale_squared();
-        let fp = si.graph_footprint(cov);
+        let fp = self.graph_footprint(&si, &v, var);
         (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
+    }
+
+    /// The footprint graphs are evaluated over at hit `si` (vertex `v`) whose tangent-plane
+    /// covariance is `var`, scaled by the texture filter, centred on the hit.
+    fn graph_footprint(&self, si: &SurfaceInteraction, v: &Vertex, var: DMat2) -> graph::Footprint {
+        si.graph_footprint(footprint::uv_covariance(var, v).as_mat2() * self.settings.filter_scale_squared())
     }
 
     /// What a shadow ray lets through: 0 when an opaque surface blocks it, otherwise the
