@@ -5,7 +5,8 @@
 # ../shared/refs/scenes and prints the throughput ratio per scene (scripts/bench_mitsuba.py).
 # A benchmark, never a test: it reports, it does not fail on a slow machine.
 #
-# usage: scripts/bench-mitsuba.sh [--spp N] [--pairs K] [--threads T] [--out FILE.md] [SCENE...]
+# usage: scripts/bench-mitsuba.sh [--spp N] [--pairs K] [--threads T] [--out FILE.md]
+#          [--tessera "LABEL=BINARY [ARGS...]"]... [SCENE...]
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 cd "$root"
@@ -21,4 +22,4 @@ if [ ! -x "$venv/bin/python" ]; then
 fi
 "$venv/bin/python" -m pip install --quiet --disable-pip-version-check "mitsuba==3.9.1" "numpy>=1.21"
 cargo build --release --quiet -p tessera
-DRJIT_LIBLLVM_PATH="$llvm" "$venv/bin/python" scripts/bench_mitsuba.py --tessera target/release/tessera "$@"
+DRJIT_LIBLLVM_PATH="$llvm" "$venv/bin/python" scripts/bench_mitsuba.py "$@"

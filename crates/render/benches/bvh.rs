@@ -1,14 +1,22 @@
-//! BVH traversal alone: closest-hit and occlusion queries of every camera ray of each reference
-//! scene (256 × 256 rays per iteration), reported as rays per second.
+//! Ray queries alone, on each backend: closest-hit and occlusion queries of every camera ray of
+//! each reference scene (256 × 256 rays per iteration), reported as rays per second; `bvh` is the
+//! built-in BVH, `embree` Embree 3 where its library loads (`scripts/install-embree.sh`).
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec2;
+use render::accel::{build_intersector, Backend};
+use render::geometry::Intersector;
 use std::path::PathBuf;
 
 fn bvh(c: &mut Criterion) {
     let refs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/refs/scenes");
     let mut group = c.benchmark_group("bvh");
     group.sample_size(20);
+    let mut backends = vec![("bvh", Backend::Bvh)];
+    match render::embree::available() {
+        Ok(_) => backends.push(("embree", Backend::Embree)),
+        Err(e) => eprintln!("embree: not measured: {e}"),
+    }
     for name in ["cbox", "textured_mesh"] {
         let scene = render::loader::load_file(&refs.join(format!("{name}.xml")), &[]).expect("scene loads");
         let (w, h) = (scene.camera.width, scene.camera.height);
@@ -17,12 +25,15 @@ fn bvh(c: &mut Criterion) {
             .map(|p| scene.camera.generate_ray(p).ray)
             .collect();
         group.throughput(Throughput::Elements(rays.len() as u64));
-        group.bench_function(format!("{name}/closest"), |b| {
-            b.iter(|| rays.iter().filter(|r| scene.accel.intersect(&scene.shapes, r).is_some()).count())
-        });
-        group.bench_function(format!("{name}/occluded"), |b| {
-            b.iter(|| rays.iter().filter(|r| scene.accel.occluded(&scene.shapes, r)).count())
-        });
+        for (label, backend) in &backends {
+            let accel: Box<dyn Intersector> = build_intersector(&scene.shapes, *backend).expect("backend builds");
+            group.bench_function(format!("{name}/{label}/closest"), |b| {
+                b.iter(|| rays.iter().filter(|r| accel.intersect(&scene.shapes, r).is_some()).count())
+            });
+            group.bench_function(format!("{name}/{label}/occluded"), |b| {
+                b.iter(|| rays.iter().filter(|r| accel.occluded(&scene.shapes, r)).count())
+            });
+        }
     }
     group.finish();
 }

@@ -212,6 +212,8 @@ pub trait Intersector: Send + Sync {
         let _ = (shapes, ray, shape);
         None
     }
+    /// What answers the queries, for reports ("built-in BVH (N primitives)", say).
+    fn describe(&self) -> String;
 }
 
 /// The acceleration structure over all primitives of a scene.
@@ -362,10 +364,16 @@ impl Accel {
     /// Builds the BVH over every primitive of `shapes`; an error (a message) when it is deeper
     /// than the traversal walks ([`MAX_BVH_DEPTH`]).
     pub fn build(shapes: &[Shape]) -> std::result::Result<Self, String> {
+        Accel::build_where(shapes, |_| true)
+    }
+
+    /// [`Accel::build`] over the shapes `keep` accepts (their hits keep their indices in
+    /// `shapes`).
+    pub fn build_where(shapes: &[Shape], keep: impl Fn(&Shape) -> bool) -> std::result::Result<Self, String> {
         let mut aabbs = Vec::new();
         let mut prims = Vec::new();
         let mut tris_unordered = Vec::new();
-        for (si, shape) in shapes.iter().enumerate() {
+        for (si, shape) in shapes.iter().enumerate().filter(|(_, s)| keep(s)) {
             match &shape.geometry {
                 ShapeGeometry::Mesh { mesh, .. } => {
                     for (ti, idx) in mesh.indices.iter().enumerate() {
@@ -498,6 +506,10 @@ impl Intersector for Accel {
         !self.bvh.ray_traverse_miss(bray, |r, id| {
             self.intersect_prim(shapes, id, o, d, ray.tmin, r.tmax).map_or(f32::INFINITY, |h| h.0)
         })
+    }
+
+    fn describe(&self) -> String {
+        format!("built-in BVH ({} primitives)", self.prims.len())
     }
 }
 

@@ -19,9 +19,11 @@
 // `!(x > 0.0)` is how this crate says "not positive, or NaN": the negation is the point.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod accel;
 pub mod bsdf;
 pub mod caching;
 pub mod camera;
+pub mod embree;
 pub mod emitter;
 pub mod error;
 pub mod film;

@@ -33,6 +33,10 @@ pub struct RenderStats {
     /// The footprint estimator (`covariance`, `raycone`, `pbrt`, `none`).
     #[serde(default)]
     pub footprint: String,
+    /// What traced the rays (`--accel`): "Embree 3.13.5 (N triangles)" or "built-in BVH (N
+    /// primitives)".
+    #[serde(default)]
+    pub accel: String,
     /// Image width in pixels.
     #[serde(default)]
     pub width: u32,

@@ -38,6 +38,10 @@ const DEFAULT_SCENE_MTLX: &str = include_str!("../../../scenes/marble.mtlx");
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// What traces rays: auto (Embree 3 where its library is installed and the scene has
+    /// triangles, else the built-in BVH), bvh (the built-in BVH) or embree (an error without it).
+    #[arg(long, global = true, default_value = "auto", value_parser = |s: &str| s.parse::<render::accel::Backend>())]
+    accel: render::accel::Backend,
 }
 
 #[derive(Subcommand, Debug)]
@@ -171,6 +175,7 @@ fn parse_footprint(s: &str) -> Result<FootprintMode, String> {
 /// and exits with status 1.
 pub fn run_cli() {
     let cli = Cli::parse();
+    render::accel::set_backend(cli.accel);
     remove_temporaries_on_signals();
     let result = match cli.command {
         Command::Render(args) => run_render(args),
@@ -524,9 +529,10 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
     let names: Vec<String> = images.iter().chain(aov_files).map(|p| p.display().to_string()).collect();
     let wrote = if names.is_empty() { String::new() } else { format!("; wrote {}", names.join(", ")) };
     eprintln!(
-        "rendered {w}x{h} at {spp} spp in {render_s:.2} s on {threads} threads: {:.3} Msamples/s, {:.2} Mrays/s{wrote}",
+        "rendered {w}x{h} at {spp} spp in {render_s:.2} s on {threads} threads: {:.3} Msamples/s, {:.2} Mrays/s by {}{wrote}",
         c.samples as f64 / render_s / 1e6,
         total_rays as f64 / render_s / 1e6,
+        scene.accel.describe(),
     );
     let node_evals: u64 = r.out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum();
     if node_evals > 0 {
@@ -605,6 +611,7 @@ fn stats_of(
         images: images.iter().map(display).collect(),
         aovs: aov_files.iter().map(display).collect(),
         footprint: format!("{:?}", args.footprint).to_lowercase(),
+        accel: scene.accel.describe(),
         width: scene.camera.width,
         height: scene.camera.height,
         spp: job.spp,

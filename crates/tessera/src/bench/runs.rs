@@ -54,7 +54,15 @@ pub(super) fn run_child(
         _ => (cfg.spp, cfg.seed),
     };
     let mut cmd = Command::new(&cfg.exe);
-    cmd.arg("render").arg(scene).arg("--quiet").arg("--spp").arg(spp.to_string()).arg("--seed").arg(seed.to_string());
+    cmd.arg("render")
+        .arg(scene)
+        .arg("--accel")
+        .arg(render::accel::backend().name())
+        .arg("--quiet")
+        .arg("--spp")
+        .arg(spp.to_string())
+        .arg("--seed")
+        .arg(seed.to_string());
     cmd.arg("--out").arg(&exr).arg("--stats-json").arg(&json).arg("-D").arg(format!("res={}", cfg.res));
     for d in &cfg.defines {
         cmd.arg("-D").arg(d);

@@ -1,0 +1,86 @@
+//! Which ray-query backend a scene's [`Intersector`] is: the built-in BVH ([`Accel`]) or
+//! Embree ([`crate::embree`]), chosen by `--accel` (auto by default).
+
+use crate::geometry::{Accel, Intersector, Shape, ShapeGeometry};
+
+/// Which ray-query backend scenes are built with ([`build_intersector`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Backend {
+    /// Embree when its library loads and the scene has triangles, else the built-in BVH.
+    #[default]
+    Auto,
+    /// The built-in BVH ([`Accel`]) always.
+    Bvh,
+    /// Embree ([`crate::embree`]); an error where it cannot be loaded.
+    Embree,
+}
+
+impl Backend {
+    /// The name `--accel` takes.
+    pub fn name(self) -> &'static str {
+        match self {
+            Backend::Auto => "auto",
+            Backend::Bvh => "bvh",
+            Backend::Embree => "embree",
+        }
+    }
+}
+
+impl std::str::FromStr for Backend {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(Backend::Auto),
+            "bvh" => Ok(Backend::Bvh),
+            "embree" => Ok(Backend::Embree),
+            _ => Err(format!("unknown ray-query backend '{s}' (expected auto, bvh or embree)")),
+        }
+    }
+}
+
+/// The backend scenes loaded from now on are built with (0 auto, 1 bvh, 2 embree); set once by
+/// the command line's `--accel`, read by the loader.
+static BACKEND: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
+
+/// Sets the backend the loader builds scenes with.
+pub fn set_backend(backend: Backend) {
+    let code = match backend {
+        Backend::Auto => 0,
+        Backend::Bvh => 1,
+        Backend::Embree => 2,
+    };
+    BACKEND.store(code, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// The backend the loader builds scenes with ([`set_backend`]; `auto` by default).
+pub fn backend() -> Backend {
+    match BACKEND.load(std::sync::atomic::Ordering::Relaxed) {
+        1 => Backend::Bvh,
+        2 => Backend::Embree,
+        _ => Backend::Auto,
+    }
+}
+
+/// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
+/// loads and the scene has a triangle, else the built-in BVH (also when Embree fails, with a
+/// warning on stderr); an error when [`Backend::Embree`] is asked for and cannot be had, or when
+/// the built-in BVH cannot hold the scene.
+pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<Box<dyn Intersector>, String> {
+    let has_triangles = shapes.iter().any(|s| matches!(s.geometry, ShapeGeometry::Mesh { .. }));
+    match backend {
+        Backend::Bvh => Ok(Box::new(Accel::build(shapes)?)),
+        Backend::Embree => crate::embree::EmbreeAccel::build(shapes)
+            .map(|a| Box::new(a) as Box<dyn Intersector>)
+            .map_err(|e| format!("--accel embree: {e} (scripts/install-embree.sh installs it)")),
+        Backend::Auto if has_triangles && crate::embree::available().is_ok() => {
+            match crate::embree::EmbreeAccel::build(shapes) {
+                Ok(a) => Ok(Box::new(a)),
+                Err(e) => {
+                    eprintln!("warning: {e}; tracing rays with the built-in BVH instead");
+                    Ok(Box::new(Accel::build(shapes)?))
+                }
+            }
+        }
+        Backend::Auto => Ok(Box::new(Accel::build(shapes)?)),
+    }
+}

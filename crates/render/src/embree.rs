@@ -1,0 +1,416 @@
+//! Intel Embree 3 behind the [`Intersector`] seam, loaded at run time.
+//!
+//! The library is opened with `dlopen` when a scene is built (`libembree3.so.3`, or the file
+//! named by `TESSERA_EMBREE`), so the same binary runs with or without it: where it is missing
+//! the renderer keeps its own BVH ([`Accel`]). Debian's `libembree3-3` package provides it
+//! (`scripts/install-embree.sh`).
+//!
+//! Embree holds the scene's triangles, one geometry per mesh shape (the geometry's id is the
+//! shape's index, its primitive ids the mesh's triangle indices). Spheres and disks stay in a
+//! BVH of ours with their own double-precision tests, queried after Embree with the ray cut at
+//! Embree's hit. Only the types and functions this file uses are declared, checked against
+//! Embree 3.13's `rtcore*.h`.
+
+use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry};
+use glam::Vec2;
+use std::ffi::{c_char, c_void};
+use std::sync::OnceLock;
+
+type Device = *mut c_void;
+type Scene = *mut c_void;
+type Geometry = *mut c_void;
+
+/// `RTCRay` (16-byte aligned, 48 bytes).
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcRay {
+    org: [f32; 3],
+    tnear: f32,
+    dir: [f32; 3],
+    time: f32,
+    tfar: f32,
+    mask: u32,
+    id: u32,
+    flags: u32,
+}
+
+/// `RTCHit` (16-byte aligned, 32 bytes, one instance level).
+#[repr(C, align(16))]
+#[derive(Clone, Copy)]
+struct RtcHit {
+    ng: [f32; 3],
+    u: f32,
+    v: f32,
+    prim_id: u32,
+    geom_id: u32,
+    inst_id: [u32; 1],
+}
+
+/// `RTCRayHit`.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct RtcRayHit {
+    ray: RtcRay,
+    hit: RtcHit,
+}
+
+/// `RTCFilterFunctionNArguments`.
+#[repr(C)]
+struct FilterArgs {
+    valid: *mut i32,
+    geometry_user_ptr: *mut c_void,
+    context: *mut IntersectContext,
+    ray: *mut c_void,
+    hit: *mut c_void,
+    n: u32,
+}
+
+type FilterFn = unsafe extern "C" fn(*const FilterArgs);
+
+/// `RTCIntersectContext` (one instance level, no minimum width).
+#[repr(C)]
+struct IntersectContext {
+    flags: u32,
+    filter: Option<FilterFn>,
+    inst_id: [u32; 1],
+}
+
+/// An intersection context followed by the one shape whose hits a query keeps (Embree hands
+/// its context filter the context's address, so the shape is read just past it).
+#[repr(C)]
+struct ShapeContext {
+    context: IntersectContext,
+    shape: u32,
+}
+
+const INVALID_ID: u32 = u32::MAX;
+const GEOMETRY_TYPE_TRIANGLE: u32 = 0;
+const BUFFER_TYPE_INDEX: u32 = 0;
+const BUFFER_TYPE_VERTEX: u32 = 1;
+const FORMAT_UINT3: u32 = 0x5003;
+const FORMAT_FLOAT3: u32 = 0x9003;
+const BUILD_QUALITY_HIGH: u32 = 2;
+const SCENE_FLAG_CONTEXT_FILTER_FUNCTION: u32 = 1 << 3;
+
+impl IntersectContext {
+    /// `rtcInitIntersectContext`: incoherent rays, no filter.
+    fn new(filter: Option<FilterFn>) -> Self {
+        IntersectContext { flags: 0, filter, inst_id: [INVALID_ID] }
+    }
+}
+
+/// The functions of the library this file calls.
+struct Api {
+    version: String,
+    new_device: unsafe extern "C" fn(*const c_char) -> Device,
+    release_device: unsafe extern "C" fn(Device),
+    device_error: unsafe extern "C" fn(Device) -> u32,
+    new_scene: unsafe extern "C" fn(Device) -> Scene,
+    release_scene: unsafe extern "C" fn(Scene),
+    set_scene_flags: unsafe extern "C" fn(Scene, u32),
+    set_scene_build_quality: unsafe extern "C" fn(Scene, u32),
+    new_geometry: unsafe extern "C" fn(Device, u32) -> Geometry,
+    release_geometry: unsafe extern "C" fn(Geometry),
+    set_new_geometry_buffer: unsafe extern "C" fn(Geometry, u32, u32, u32, usize, usize) -> *mut c_void,
+    set_geometry_build_quality: unsafe extern "C" fn(Geometry, u32),
+    commit_geometry: unsafe extern "C" fn(Geometry),
+    attach_geometry_by_id: unsafe extern "C" fn(Scene, Geometry, u32),
+    commit_scene: unsafe extern "C" fn(Scene),
+    intersect1: unsafe extern "C" fn(Scene, *mut IntersectContext, *mut RtcRayHit),
+    occluded1: unsafe extern "C" fn(Scene, *mut IntersectContext, *mut RtcRay),
+    /// Keeps the library mapped for as long as the function pointers above are used (the
+    /// process's lifetime: the API is loaded once).
+    _library: libloading::Library,
+}
+
+/// The library's file names tried in turn (`TESSERA_EMBREE` first when set).
+fn candidates() -> Vec<String> {
+    let mut names = Vec::new();
+    if let Ok(path) = std::env::var("TESSERA_EMBREE") {
+        if !path.is_empty() {
+            names.push(path);
+        }
+    }
+    names.extend(["libembree3.so.3".to_string(), "libembree3.so".to_string()]);
+    names
+}
+
+impl Api {
+    fn load() -> Result<Api, String> {
+        let mut tried = Vec::new();
+        for name in candidates() {
+            // SAFETY: loading Embree runs its initialisers, which only set up its own state.
+            match unsafe { libloading::Library::new(&name) } {
+                Ok(library) => return Api::bind(library).map_err(|e| format!("{name}: {e}")),
+                Err(e) => tried.push(format!("{name}: {e}")),
+            }
+        }
+        Err(format!("Embree 3 is not installed ({})", tried.join("; ")))
+    }
+
+    fn bind(library: libloading::Library) -> Result<Api, String> {
+        /// One function of the library, as the pointer type it is declared with above.
+        macro_rules! sym {
+            ($name:literal) => {
+                // SAFETY: each name is declared with the signature of Embree 3's header.
+                *unsafe { library.get(concat!($name, "\0").as_bytes()) }.map_err(|e| format!("{}: {e}", $name))?
+            };
+        }
+        let get_device_property: unsafe extern "C" fn(Device, u32) -> isize = sym!("rtcGetDeviceProperty");
+        let mut api = Api {
+            version: String::new(),
+            new_device: sym!("rtcNewDevice"),
+            release_device: sym!("rtcReleaseDevice"),
+            device_error: sym!("rtcGetDeviceError"),
+            new_scene: sym!("rtcNewScene"),
+            release_scene: sym!("rtcReleaseScene"),
+            set_scene_flags: sym!("rtcSetSceneFlags"),
+            set_scene_build_quality: sym!("rtcSetSceneBuildQuality"),
+            new_geometry: sym!("rtcNewGeometry"),
+            release_geometry: sym!("rtcReleaseGeometry"),
+            set_new_geometry_buffer: sym!("rtcSetNewGeometryBuffer"),
+            set_geometry_build_quality: sym!("rtcSetGeometryBuildQuality"),
+            commit_geometry: sym!("rtcCommitGeometry"),
+            attach_geometry_by_id: sym!("rtcAttachGeometryByID"),
+            commit_scene: sym!("rtcCommitScene"),
+            intersect1: sym!("rtcIntersect1"),
+            occluded1: sym!("rtcOccluded1"),
+            _library: library,
+        };
+        // RTC_DEVICE_PROPERTY_VERSION_{MAJOR,MINOR,PATCH} = 1, 2, 3, on a throwaway device.
+        // SAFETY: a null configuration string is the documented default.
+        let device = unsafe { (api.new_device)(std::ptr::null()) };
+        if device.is_null() {
+            return Err("rtcNewDevice failed".into());
+        }
+        // SAFETY: `device` is a live device.
+        let [major, minor, patch] = [1, 2, 3].map(|p| unsafe { get_device_property(device, p) });
+        unsafe { (api.release_device)(device) };
+        if major != 3 {
+            return Err(format!("Embree {major}.{minor}.{patch} found where version 3 is expected"));
+        }
+        api.version = format!("{major}.{minor}.{patch}");
+        Ok(api)
+    }
+}
+
+static API: OnceLock<Result<Api, String>> = OnceLock::new();
+
+fn api() -> Result<&'static Api, String> {
+    API.get_or_init(Api::load).as_ref().map_err(Clone::clone)
+}
+
+/// Whether Embree can be loaded, and its version (or why not).
+pub fn available() -> Result<String, String> {
+    api().map(|a| a.version.clone())
+}
+
+/// Context filter of [`EmbreeAccel::intersect_shape`]: rejects every hit on another geometry
+/// than the query's shape.
+unsafe extern "C" fn keep_one_shape(args: *const FilterArgs) {
+    // SAFETY: Embree passes live arguments; the context is the first field of a
+    // `ShapeContext` (only queries made by `intersect_shape` carry this filter), and the hits
+    // are N structure-of-arrays lanes whose geometry ids are the seventh array of N words.
+    unsafe {
+        let args = &*args;
+        let wanted = (*(args.context as *const ShapeContext)).shape;
+        let n = args.n as usize;
+        let geom_ids = (args.hit as *const u32).add(6 * n);
+        for i in 0..n {
+            if *geom_ids.add(i) != wanted {
+                *args.valid.add(i) = 0;
+            }
+        }
+    }
+}
+
+/// The scene's triangles in Embree, its spheres and disks in a BVH of ours.
+pub struct EmbreeAccel {
+    api: &'static Api,
+    device: Device,
+    scene: Scene,
+    /// Spheres and disks (`None` when the scene has none).
+    analytic: Option<Accel>,
+    triangles: usize,
+}
+
+// SAFETY: a committed Embree scene is read-only and Embree documents its queries as safe to
+// make from any number of threads at once; the handles are released only on drop.
+unsafe impl Send for EmbreeAccel {}
+unsafe impl Sync for EmbreeAccel {}
+
+impl Drop for EmbreeAccel {
+    fn drop(&mut self) {
+        // SAFETY: both handles were created by this value and are released once.
+        unsafe {
+            (self.api.release_scene)(self.scene);
+            (self.api.release_device)(self.device);
+        }
+    }
+}
+
+impl EmbreeAccel {
+    /// Builds the scene's structures; an error when Embree cannot be loaded or fails.
+    pub fn build(shapes: &[Shape]) -> Result<EmbreeAccel, String> {
+        let api = api()?;
+        // SAFETY: every call below follows Embree's documented order (device, scene,
+        // geometries with their buffers filled to the sizes asked for, commit); handles are
+        // checked before use and the errors read back from the device.
+        unsafe {
+            let device = (api.new_device)(c"verbose=0".as_ptr());
+            if device.is_null() {
+                return Err("Embree: rtcNewDevice failed".into());
+            }
+            let scene = (api.new_scene)(device);
+            let accel = EmbreeAccel { api, device, scene, analytic: None, triangles: 0 };
+            if scene.is_null() {
+                return Err(accel.error("rtcNewScene"));
+            }
+            // Not RTC_SCENE_FLAG_ROBUST: its watertight test closes the cracks that rays through a
+            // shared edge exactly can fall into (the built-in BVH has them too), at 10 % of an
+            // untextured render (cbox, measured).
+            (api.set_scene_flags)(scene, SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+            (api.set_scene_build_quality)(scene, BUILD_QUALITY_HIGH);
+            let mut accel = accel;
+            for (si, shape) in shapes.iter().enumerate() {
+                let ShapeGeometry::Mesh { mesh, .. } = &shape.geometry else { continue };
+                let geom = (api.new_geometry)(device, GEOMETRY_TYPE_TRIANGLE);
+                if geom.is_null() {
+                    return Err(accel.error("rtcNewGeometry"));
+                }
+                (api.set_geometry_build_quality)(geom, BUILD_QUALITY_HIGH);
+                let nv = mesh.positions.len();
+                let vertices =
+                    (api.set_new_geometry_buffer)(geom, BUFFER_TYPE_VERTEX, 0, FORMAT_FLOAT3, 12, nv) as *mut [f32; 3];
+                let nt = mesh.indices.len();
+                let indices =
+                    (api.set_new_geometry_buffer)(geom, BUFFER_TYPE_INDEX, 0, FORMAT_UINT3, 12, nt) as *mut [u32; 3];
+                if vertices.is_null() || indices.is_null() {
+                    (api.release_geometry)(geom);
+                    return Err(accel.error(&format!("buffers of shape '{}'", shape.name)));
+                }
+                for (k, p) in mesh.positions.iter().enumerate() {
+                    vertices.add(k).write(p.to_array());
+                }
+                for (k, t) in mesh.indices.iter().enumerate() {
+                    indices.add(k).write(*t);
+                }
+                (api.commit_geometry)(geom);
+                (api.attach_geometry_by_id)(scene, geom, si as u32);
+                (api.release_geometry)(geom);
+                accel.triangles += nt;
+            }
+            (api.commit_scene)(scene);
+            if (api.device_error)(device) != 0 {
+                return Err(accel.error("rtcCommitScene"));
+            }
+            let analytic = shapes.iter().any(|s| !matches!(s.geometry, ShapeGeometry::Mesh { .. }));
+            if analytic {
+                accel.analytic =
+                    Some(Accel::build_where(shapes, |s| !matches!(s.geometry, ShapeGeometry::Mesh { .. }))?);
+            }
+            Ok(accel)
+        }
+    }
+
+    /// Triangles held by Embree.
+    pub fn triangles(&self) -> usize {
+        self.triangles
+    }
+
+    fn error(&self, what: &str) -> String {
+        // SAFETY: the device is live.
+        let code = unsafe { (self.api.device_error)(self.device) };
+        format!("Embree {}: {what} failed (error code {code})", self.api.version)
+    }
+
+    /// The closest triangle hit of `ray` (on shape `only` alone when given).
+    #[inline]
+    fn closest_triangle(&self, ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
+        if !valid(ray) {
+            return None;
+        }
+        let mut rh = RtcRayHit {
+            ray: rtc_ray(ray),
+            hit: RtcHit {
+                ng: [0.0; 3],
+                u: 0.0,
+                v: 0.0,
+                prim_id: INVALID_ID,
+                geom_id: INVALID_ID,
+                inst_id: [INVALID_ID],
+            },
+        };
+        let mut context = ShapeContext {
+            context: IntersectContext::new(only.map(|_| keep_one_shape as FilterFn)),
+            shape: only.unwrap_or(INVALID_ID),
+        };
+        // SAFETY: the scene is committed; the ray-hit and context live across the call.
+        unsafe { (self.api.intersect1)(self.scene, &mut context.context, &mut rh) };
+        (rh.hit.geom_id != INVALID_ID).then(|| PreliminaryHit {
+            t: rh.ray.tfar,
+            shape: rh.hit.geom_id,
+            index: rh.hit.prim_id,
+            bary: Vec2::new(rh.hit.u, rh.hit.v),
+        })
+    }
+}
+
+/// Whether Embree may be given `ray`: a finite origin and direction and a non-empty interval
+/// starting at or after 0 (its queries are undefined otherwise; such a ray hits nothing).
+#[inline]
+fn valid(ray: &Ray) -> bool {
+    ray.o.is_finite() && ray.d.is_finite() && ray.tmin >= 0.0 && ray.tmin < ray.tmax
+}
+
+#[inline]
+fn rtc_ray(ray: &Ray) -> RtcRay {
+    RtcRay {
+        org: ray.o.to_array(),
+        tnear: ray.tmin,
+        dir: ray.d.to_array(),
+        time: 0.0,
+        tfar: ray.tmax,
+        mask: u32::MAX,
+        id: 0,
+        flags: 0,
+    }
+}
+
+impl Intersector for EmbreeAccel {
+    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        let tri = self.closest_triangle(ray, None);
+        let Some(analytic) = &self.analytic else { return tri };
+        let mut cut = *ray;
+        if let Some(h) = &tri {
+            cut.tmax = h.t;
+        }
+        analytic.intersect(shapes, &cut).or(tri)
+    }
+
+    fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
+        match shapes.get(shape as usize).map(|s| &s.geometry) {
+            Some(ShapeGeometry::Mesh { .. }) => self.closest_triangle(ray, Some(shape)),
+            Some(_) => self.analytic.as_ref()?.intersect_shape(shapes, ray, shape),
+            None => None,
+        }
+    }
+
+    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
+        if valid(ray) {
+            let mut r = rtc_ray(ray);
+            let mut context = IntersectContext::new(None);
+            // SAFETY: as in `closest_triangle`.
+            unsafe { (self.api.occluded1)(self.scene, &mut context, &mut r) };
+            // Embree marks an occluded ray by setting its far end to −∞.
+            if r.tfar == f32::NEG_INFINITY {
+                return true;
+            }
+        }
+        self.analytic.as_ref().is_some_and(|a| a.occluded(shapes, ray))
+    }
+
+    fn describe(&self) -> String {
+        format!("Embree {} ({} triangles)", self.api.version, self.triangles)
+    }
+}
