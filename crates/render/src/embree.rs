@@ -5,14 +5,16 @@
 //! the renderer keeps its own BVH ([`Accel`]). Debian's `libembree3-3` package provides it
 //! (`scripts/install-embree.sh`).
 //!
-//! Embree holds the scene's triangles, one geometry per mesh shape (the geometry's id is the
-//! shape's index, its primitive ids the mesh's triangle indices). Spheres and disks stay in a
-//! BVH of ours with their own double-precision tests, queried after Embree with the ray cut at
-//! Embree's hit. Only the types and functions this file uses are declared, checked against
-//! Embree 3.13's `rtcore*.h`.
+//! Embree holds every shape, one geometry per shape whose id is the shape's index: meshes as
+//! triangle geometries (primitive ids are the mesh's triangle indices), spheres and disks as
+//! user geometries whose callbacks run the renderer's own double-precision tests, so one
+//! traversal answers each query. Only the types and functions this file uses are declared,
+//! checked against Embree 3.13's `rtcore*.h`.
 
-use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry};
-use glam::Vec2;
+use crate::geometry::{
+    intersect_disk, intersect_sphere, Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry,
+};
+use glam::{Affine3A, Vec2, Vec3};
 use std::ffi::{c_char, c_void};
 use std::sync::OnceLock;
 
@@ -67,6 +69,40 @@ struct FilterArgs {
 
 type FilterFn = unsafe extern "C" fn(*const FilterArgs);
 
+/// `RTCBounds`.
+#[repr(C, align(16))]
+struct Bounds {
+    lower: [f32; 3],
+    _align0: f32,
+    upper: [f32; 3],
+    _align1: f32,
+}
+
+/// `RTCBoundsFunctionArguments`.
+#[repr(C)]
+struct BoundsArgs {
+    geometry_user_ptr: *mut c_void,
+    prim_id: u32,
+    time_step: u32,
+    bounds: *mut Bounds,
+}
+
+/// `RTCIntersectFunctionNArguments` and `RTCOccludedFunctionNArguments` (the same layout: the
+/// intersect callback's `rayhit` is the occluded callback's `ray`).
+#[repr(C)]
+struct UserArgs {
+    valid: *mut i32,
+    geometry_user_ptr: *mut c_void,
+    prim_id: u32,
+    context: *mut IntersectContext,
+    rays: *mut f32,
+    n: u32,
+    geom_id: u32,
+}
+
+type BoundsFn = unsafe extern "C" fn(*const BoundsArgs);
+type UserFn = unsafe extern "C" fn(*const UserArgs);
+
 /// `RTCIntersectContext` (one instance level, no minimum width).
 #[repr(C)]
 struct IntersectContext {
@@ -85,6 +121,7 @@ struct ShapeContext {
 
 const INVALID_ID: u32 = u32::MAX;
 const GEOMETRY_TYPE_TRIANGLE: u32 = 0;
+const GEOMETRY_TYPE_USER: u32 = 120;
 const BUFFER_TYPE_INDEX: u32 = 0;
 const BUFFER_TYPE_VERTEX: u32 = 1;
 const FORMAT_UINT3: u32 = 0x5003;
@@ -114,6 +151,11 @@ struct Api {
     set_new_geometry_buffer: unsafe extern "C" fn(Geometry, u32, u32, u32, usize, usize) -> *mut c_void,
     set_geometry_build_quality: unsafe extern "C" fn(Geometry, u32),
     commit_geometry: unsafe extern "C" fn(Geometry),
+    set_geometry_user_data: unsafe extern "C" fn(Geometry, *mut c_void),
+    set_geometry_user_primitive_count: unsafe extern "C" fn(Geometry, u32),
+    set_geometry_bounds_function: unsafe extern "C" fn(Geometry, BoundsFn, *mut c_void),
+    set_geometry_intersect_function: unsafe extern "C" fn(Geometry, UserFn),
+    set_geometry_occluded_function: unsafe extern "C" fn(Geometry, UserFn),
     attach_geometry_by_id: unsafe extern "C" fn(Scene, Geometry, u32),
     commit_scene: unsafe extern "C" fn(Scene),
     intersect1: unsafe extern "C" fn(Scene, *mut IntersectContext, *mut RtcRayHit),
@@ -171,6 +213,11 @@ impl Api {
             set_new_geometry_buffer: sym!("rtcSetNewGeometryBuffer"),
             set_geometry_build_quality: sym!("rtcSetGeometryBuildQuality"),
             commit_geometry: sym!("rtcCommitGeometry"),
+            set_geometry_user_data: sym!("rtcSetGeometryUserData"),
+            set_geometry_user_primitive_count: sym!("rtcSetGeometryUserPrimitiveCount"),
+            set_geometry_bounds_function: sym!("rtcSetGeometryBoundsFunction"),
+            set_geometry_intersect_function: sym!("rtcSetGeometryIntersectFunction"),
+            set_geometry_occluded_function: sym!("rtcSetGeometryOccludedFunction"),
             attach_geometry_by_id: sym!("rtcAttachGeometryByID"),
             commit_scene: sym!("rtcCommitScene"),
             intersect1: sym!("rtcIntersect1"),
@@ -224,13 +271,124 @@ unsafe extern "C" fn keep_one_shape(args: *const FilterArgs) {
     }
 }
 
-/// The scene's triangles in Embree, its spheres and disks in a BVH of ours.
+/// A sphere or disk as an Embree user geometry sees it (the callbacks' user pointer).
+enum Analytic {
+    Sphere { center: Vec3, radius: f32 },
+    Disk { to_object: Affine3A },
+}
+
+impl Analytic {
+    /// The renderer's own test ([`intersect_sphere`], [`intersect_disk`]).
+    #[inline]
+    fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+        match self {
+            Analytic::Sphere { center, radius } => intersect_sphere(*center, *radius, o, d, tmin, tmax),
+            Analytic::Disk { to_object } => intersect_disk(to_object, o, d, tmin, tmax),
+        }
+    }
+}
+
+/// Bounds callback of a sphere or disk: the box of the built-in BVH ([`Accel`] builds the same).
+unsafe extern "C" fn analytic_bounds(args: *const BoundsArgs) {
+    // SAFETY: Embree passes the user pointer set at build (a live `Analytic` owned by the
+    // accelerator) and a bounds record to write.
+    unsafe {
+        let args = &*args;
+        let (lo, hi) = match &*(args.geometry_user_ptr as *const Analytic) {
+            Analytic::Sphere { center, radius } => (*center - *radius, *center + *radius),
+            Analytic::Disk { to_object } => {
+                let to_world = to_object.inverse();
+                let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                    .map(|(x, y)| to_world.transform_point3(Vec3::new(x, y, 0.0)));
+                let (lo, hi) =
+                    corners.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+                // The rounding of the transformed corners, as `geometry::padded` allows.
+                let pad = 1e-6 * (1.0 + (hi - lo).length() + ((lo + hi) * 0.5).abs().max_element());
+                (lo - pad, hi + pad)
+            }
+        };
+        args.bounds.write(Bounds { lower: lo.to_array(), _align0: 0.0, upper: hi.to_array(), _align1: 0.0 });
+    }
+}
+
+/// The query's one shape when it carries [`keep_one_shape`] (`intersect_shape`), else `None`.
+///
+/// # Safety
+/// `context` is a live context passed by Embree to a query of this module.
+#[inline]
+unsafe fn only_shape(context: *const IntersectContext) -> Option<u32> {
+    // SAFETY: contexts with this filter are the first field of a `ShapeContext`.
+    unsafe {
+        let filter = (*context).filter?;
+        (filter as usize == keep_one_shape as FilterFn as usize).then(|| (*(context as *const ShapeContext)).shape)
+    }
+}
+
+/// Intersect callback of a sphere or disk: for each valid lane of the N structure-of-arrays
+/// rays (12 arrays of ray fields, then the hit's), a hit nearer than the ray's far end becomes
+/// its hit. A query restricted to another shape ignores it (Embree applies its context filter to
+/// triangles only).
+unsafe extern "C" fn analytic_intersect(args: *const UserArgs) {
+    // SAFETY: Embree passes N live lanes in its documented SOA layout and the user pointer set
+    // at build.
+    unsafe {
+        let args = &*args;
+        if only_shape(args.context).is_some_and(|s| s != args.geom_id) {
+            return;
+        }
+        let shape = &*(args.geometry_user_ptr as *const Analytic);
+        let n = args.n as usize;
+        let f = |k: usize, i: usize| args.rays.add(k * n + i);
+        for i in 0..n {
+            if *args.valid.add(i) == 0 {
+                continue;
+            }
+            let o = Vec3::new(*f(0, i), *f(1, i), *f(2, i));
+            let d = Vec3::new(*f(4, i), *f(5, i), *f(6, i));
+            let Some(t) = shape.intersect(o, d, *f(3, i), *f(8, i)) else { continue };
+            *f(8, i) = t;
+            // Hit: Ng (3 arrays), u, v, primID, geomID, instID, after the ray's 12.
+            for k in 12..17 {
+                *f(k, i) = 0.0;
+            }
+            *(f(17, i) as *mut u32) = args.prim_id;
+            *(f(18, i) as *mut u32) = args.geom_id;
+            *(f(19, i) as *mut u32) = (*args.context).inst_id[0];
+        }
+    }
+}
+
+/// Occluded callback of a sphere or disk: a blocked lane's far end becomes −∞.
+unsafe extern "C" fn analytic_occluded(args: *const UserArgs) {
+    // SAFETY: as in `analytic_intersect` (the ray arrays alone).
+    unsafe {
+        let args = &*args;
+        let shape = &*(args.geometry_user_ptr as *const Analytic);
+        let n = args.n as usize;
+        let f = |k: usize, i: usize| args.rays.add(k * n + i);
+        for i in 0..n {
+            if *args.valid.add(i) == 0 {
+                continue;
+            }
+            let o = Vec3::new(*f(0, i), *f(1, i), *f(2, i));
+            let d = Vec3::new(*f(4, i), *f(5, i), *f(6, i));
+            if shape.intersect(o, d, *f(3, i), *f(8, i)).is_some() {
+                *f(8, i) = f32::NEG_INFINITY;
+            }
+        }
+    }
+}
+
+/// The whole scene in Embree ([`Analytic`] shapes through callbacks).
 pub struct EmbreeAccel {
     api: &'static Api,
     device: Device,
     scene: Scene,
-    /// Spheres and disks (`None` when the scene has none).
-    analytic: Option<Accel>,
+    /// What the user geometries' callbacks read (boxed: Embree keeps their addresses).
+    _analytic: Vec<Box<Analytic>>,
+    /// The spheres and disks again, for [`Intersector::intersect_shape`] on one of them (`None`
+    /// when the scene has none).
+    analytic_bvh: Option<Accel>,
     triangles: usize,
 }
 
@@ -262,7 +420,7 @@ impl EmbreeAccel {
                 return Err("Embree: rtcNewDevice failed".into());
             }
             let scene = (api.new_scene)(device);
-            let accel = EmbreeAccel { api, device, scene, analytic: None, triangles: 0 };
+            let accel = EmbreeAccel { api, device, scene, _analytic: Vec::new(), analytic_bvh: None, triangles: 0 };
             if scene.is_null() {
                 return Err(accel.error("rtcNewScene"));
             }
@@ -273,7 +431,17 @@ impl EmbreeAccel {
             (api.set_scene_build_quality)(scene, BUILD_QUALITY_HIGH);
             let mut accel = accel;
             for (si, shape) in shapes.iter().enumerate() {
-                let ShapeGeometry::Mesh { mesh, .. } = &shape.geometry else { continue };
+                let mesh = match &shape.geometry {
+                    ShapeGeometry::Mesh { mesh, .. } => mesh,
+                    ShapeGeometry::Sphere { center, radius, .. } => {
+                        accel.add_analytic(si, Analytic::Sphere { center: *center, radius: *radius })?;
+                        continue;
+                    }
+                    ShapeGeometry::Disk { to_object, .. } => {
+                        accel.add_analytic(si, Analytic::Disk { to_object: *to_object })?;
+                        continue;
+                    }
+                };
                 let geom = (api.new_geometry)(device, GEOMETRY_TYPE_TRIANGLE);
                 if geom.is_null() {
                     return Err(accel.error("rtcNewGeometry"));
@@ -304,13 +472,39 @@ impl EmbreeAccel {
             if (api.device_error)(device) != 0 {
                 return Err(accel.error("rtcCommitScene"));
             }
-            let analytic = shapes.iter().any(|s| !matches!(s.geometry, ShapeGeometry::Mesh { .. }));
-            if analytic {
-                accel.analytic =
+            if !accel._analytic.is_empty() {
+                accel.analytic_bvh =
                     Some(Accel::build_where(shapes, |s| !matches!(s.geometry, ShapeGeometry::Mesh { .. }))?);
             }
             Ok(accel)
         }
+    }
+
+    /// Attaches shape `si` as a user geometry of one primitive.
+    ///
+    /// # Safety
+    /// The scene is not committed yet.
+    unsafe fn add_analytic(&mut self, si: usize, shape: Analytic) -> Result<(), String> {
+        let api = self.api;
+        // SAFETY: as in `build`; the boxed shape outlives the scene (dropped after it).
+        unsafe {
+            let geom = (api.new_geometry)(self.device, GEOMETRY_TYPE_USER);
+            if geom.is_null() {
+                return Err(self.error("rtcNewGeometry (user)"));
+            }
+            let mut boxed = Box::new(shape);
+            let user = &mut *boxed as *mut Analytic as *mut c_void;
+            self._analytic.push(boxed);
+            (api.set_geometry_user_primitive_count)(geom, 1);
+            (api.set_geometry_user_data)(geom, user);
+            (api.set_geometry_bounds_function)(geom, analytic_bounds, std::ptr::null_mut());
+            (api.set_geometry_intersect_function)(geom, analytic_intersect);
+            (api.set_geometry_occluded_function)(geom, analytic_occluded);
+            (api.commit_geometry)(geom);
+            (api.attach_geometry_by_id)(self.scene, geom, si as u32);
+            (api.release_geometry)(geom);
+        }
+        Ok(())
     }
 
     /// Triangles held by Embree.
@@ -324,9 +518,9 @@ impl EmbreeAccel {
         format!("Embree {}: {what} failed (error code {code})", self.api.version)
     }
 
-    /// The closest triangle hit of `ray` (on shape `only` alone when given).
+    /// The closest hit of `ray` (on mesh shape `only` alone when given).
     #[inline]
-    fn closest_triangle(&self, ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
+    fn closest(&self, ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
         if !valid(ray) {
             return None;
         }
@@ -378,36 +572,28 @@ fn rtc_ray(ray: &Ray) -> RtcRay {
 }
 
 impl Intersector for EmbreeAccel {
-    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
-        let tri = self.closest_triangle(ray, None);
-        let Some(analytic) = &self.analytic else { return tri };
-        let mut cut = *ray;
-        if let Some(h) = &tri {
-            cut.tmax = h.t;
-        }
-        analytic.intersect(shapes, &cut).or(tri)
+    fn intersect(&self, _shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        self.closest(ray, None)
     }
 
     fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
         match shapes.get(shape as usize).map(|s| &s.geometry) {
-            Some(ShapeGeometry::Mesh { .. }) => self.closest_triangle(ray, Some(shape)),
-            Some(_) => self.analytic.as_ref()?.intersect_shape(shapes, ray, shape),
+            Some(ShapeGeometry::Mesh { .. }) => self.closest(ray, Some(shape)),
+            Some(_) => self.analytic_bvh.as_ref()?.intersect_shape(shapes, ray, shape),
             None => None,
         }
     }
 
-    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
-        if valid(ray) {
-            let mut r = rtc_ray(ray);
-            let mut context = IntersectContext::new(None);
-            // SAFETY: as in `closest_triangle`.
-            unsafe { (self.api.occluded1)(self.scene, &mut context, &mut r) };
-            // Embree marks an occluded ray by setting its far end to −∞.
-            if r.tfar == f32::NEG_INFINITY {
-                return true;
-            }
+    fn occluded(&self, _shapes: &[Shape], ray: &Ray) -> bool {
+        if !valid(ray) {
+            return false;
         }
-        self.analytic.as_ref().is_some_and(|a| a.occluded(shapes, ray))
+        let mut r = rtc_ray(ray);
+        let mut context = IntersectContext::new(None);
+        // SAFETY: as in `closest`.
+        unsafe { (self.api.occluded1)(self.scene, &mut context, &mut r) };
+        // Embree marks an occluded ray by setting its far end to −∞.
+        r.tfar == f32::NEG_INFINITY
     }
 
     fn describe(&self) -> String {

@@ -267,7 +267,7 @@ fn intersect_triangle(tri: &TriPrim, o: Vec3A, d: Vec3A, tmin: f32, tmax: f32) -
 }
 
 #[inline]
-fn intersect_sphere(center: Vec3, radius: f32, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+pub(crate) fn intersect_sphere(center: Vec3, radius: f32, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
     // Double precision keeps grazing and distant hits stable.
     let oc = (o - center).as_dvec3();
     let d = d.as_dvec3();
@@ -293,7 +293,7 @@ fn intersect_sphere(center: Vec3, radius: f32, o: Vec3, d: Vec3, tmin: f32, tmax
 }
 
 #[inline]
-fn intersect_disk(to_object: &Affine3A, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+pub(crate) fn intersect_disk(to_object: &Affine3A, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
     let lo = to_object.transform_point3(o);
     let ld = to_object.transform_vector3(d);
     if ld.z == 0.0 {
