@@ -45,6 +45,8 @@ pub enum ShapeGeometry {
         mesh: TriangleMesh,
         /// Cumulative triangle areas for sampling, and the total area.
         area: crate::sampling::Distribution1D,
+        /// Per triangle, what every hit on it shares ([`ShapeGeometry::mesh`] computes them).
+        frames: Vec<TriangleFrame>,
     },
     /// A sphere; `rotation` maps object axes to world axes (for uv).
     Sphere {
@@ -66,6 +68,41 @@ pub enum ShapeGeometry {
         /// World-space area.
         area: f32,
     },
+}
+
+/// What every hit on one triangle shares, computed once per triangle when the shape is made
+/// (a division, two square roots and a handful of cross products fewer per hit and per light
+/// sample): ∂p/∂u and ∂p/∂v, and the frame of the face normal, whose tangent follows ∂p/∂u.
+#[derive(Clone, Copy, Debug)]
+pub struct TriangleFrame {
+    /// ∂p/∂u (the first edge where the uvs are degenerate).
+    pub dpdu: Vec3,
+    /// ∂p/∂v (the second edge where the uvs are degenerate).
+    pub dpdv: Vec3,
+    /// `n` is the unit geometric normal (zero for a degenerate triangle); `s` follows `dpdu`.
+    pub face: Frame,
+}
+
+impl ShapeGeometry {
+    /// A mesh shape's geometry: the mesh, its area distribution and its triangles' frames.
+    pub fn mesh(mesh: TriangleMesh, area: crate::sampling::Distribution1D) -> ShapeGeometry {
+        let frames = mesh
+            .indices
+            .iter()
+            .map(|idx| {
+                let [p0, p1, p2] = idx.map(|i| mesh.positions[i as usize]);
+                let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+                let (uv0, uv1, uv2) = match &mesh.uvs {
+                    Some(uv) => (uv[idx[0] as usize], uv[idx[1] as usize], uv[idx[2] as usize]),
+                    None => (Vec2::ZERO, Vec2::X, Vec2::Y),
+                };
+                let (dpdu, dpdv) =
+                    uv_derivatives(uv1 - uv0, uv2 - uv0, p1 - p0, p2 - p0).unwrap_or_else(|| (p1 - p0, p2 - p0));
+                TriangleFrame { dpdu, dpdv, face: Frame::from_normal_tangent(ng, dpdu) }
+            })
+            .collect();
+        ShapeGeometry::Mesh { mesh, area, frames }
+    }
 }
 
 /// A shape: geometry plus what is bound to it.
@@ -518,7 +555,7 @@ pub fn interaction(shapes: &[Shape], ray: &Ray, hit: &PreliminaryHit) -> Surface
     let shape = &shapes[hit.shape as usize];
     let p_ray = ray.at(hit.t);
     let mut si = match &shape.geometry {
-        ShapeGeometry::Mesh { mesh, .. } => mesh_interaction(mesh, hit, shape.face_normals),
+        ShapeGeometry::Mesh { mesh, frames, .. } => mesh_interaction(mesh, frames, hit, shape.face_normals),
         ShapeGeometry::Sphere { center, radius, rotation } => sphere_interaction(*center, *radius, rotation, p_ray),
         ShapeGeometry::Disk { to_world, to_object, normal, .. } => {
             disk_interaction(to_world, to_object, *normal, p_ray)
@@ -561,39 +598,45 @@ fn uv_derivatives(duv1: Vec2, duv2: Vec2, d1: Vec3, d2: Vec3) -> Option<(Vec3, V
     Some(((d1 * duv2.y - d2 * duv1.y) * inv, (d2 * duv1.x - d1 * duv2.x) * inv))
 }
 
-fn mesh_interaction(mesh: &TriangleMesh, hit: &PreliminaryHit, face_normals: bool) -> SurfaceInteraction {
+fn mesh_interaction(
+    mesh: &TriangleMesh,
+    frames: &[TriangleFrame],
+    hit: &PreliminaryHit,
+    face_normals: bool,
+) -> SurfaceInteraction {
     let [i0, i1, i2] = mesh.indices[hit.index as usize].map(|i| i as usize);
+    let frame = &frames[hit.index as usize];
     let (p0, p1, p2) = (mesh.positions[i0], mesh.positions[i1], mesh.positions[i2]);
     let (b1, b2) = (hit.bary.x, hit.bary.y);
     let b0 = 1.0 - b1 - b2;
     let p = p0 * b0 + p1 * b1 + p2 * b2;
-    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    let ng = frame.face.n;
     let (uv0, uv1, uv2) = match &mesh.uvs {
         Some(uv) => (uv[i0], uv[i1], uv[i2]),
         None => (Vec2::ZERO, Vec2::X, Vec2::Y),
     };
     let uv = uv0 * b0 + uv1 * b1 + uv2 * b2;
     let (duv1, duv2) = (uv1 - uv0, uv2 - uv0);
-    let (dpdu, dpdv) = uv_derivatives(duv1, duv2, p1 - p0, p2 - p0).unwrap_or_else(|| (p1 - p0, p2 - p0));
+    let (dpdu, dpdv) = (frame.dpdu, frame.dpdv);
     let mut si = empty_interaction(p, ng);
     si.uv = uv;
     si.dpdu = dpdu;
     si.dpdv = dpdv;
-    let mut n = ng;
+    si.sh = frame.face;
     if let (Some(normals), false) = (&mesh.normals, face_normals) {
         let (n0, n1, n2) = (normals[i0], normals[i1], normals[i2]);
         let nn = n0 * b0 + n1 * b1 + n2 * b2;
         let len = nn.length();
         if len > 1e-12 {
-            n = nn / len;
+            let n = nn / len;
             if let Some((dndu_raw, dndv_raw)) = uv_derivatives(duv1, duv2, n1 - n0, n2 - n0) {
                 // Derivative of the normalised interpolant.
                 si.dndu = (dndu_raw - n * n.dot(dndu_raw)) / len;
                 si.dndv = (dndv_raw - n * n.dot(dndv_raw)) / len;
             }
+            si.sh = Frame::from_normal_tangent(n, dpdu);
         }
     }
-    si.sh = Frame::from_normal_tangent(n, dpdu);
     si
 }
 
@@ -668,12 +711,12 @@ impl Shape {
     pub fn sample_area(&self, u: Vec2) -> SurfaceSample {
         let flip = if self.flip_normals { -1.0 } else { 1.0 };
         match &self.geometry {
-            ShapeGeometry::Mesh { mesh, area } => {
+            ShapeGeometry::Mesh { mesh, area, frames } => {
                 let (ti, ux) = area.sample(u.x);
                 let [a, b, c] = mesh.indices[ti].map(|i| mesh.positions[i as usize]);
                 let bary = crate::sampling::square_to_triangle(Vec2::new(ux, u.y));
                 let p = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
-                let mut n = (b - a).cross(c - a).normalize_or_zero();
+                let mut n = frames[ti].face.n;
                 if let (Some(normals), false) = (&mesh.normals, self.face_normals) {
                     let [na, nb, nc] = mesh.indices[ti].map(|i| normals[i as usize]);
                     n = (na * (1.0 - bary.x - bary.y) + nb * bary.x + nc * bary.y).normalize_or(n);
@@ -718,7 +761,7 @@ mod tests {
     fn mesh_shape(mesh: TriangleMesh) -> Shape {
         let area = mesh_area_distribution(&mesh).unwrap();
         Shape {
-            geometry: ShapeGeometry::Mesh { mesh, area },
+            geometry: ShapeGeometry::mesh(mesh, area),
             material: 0,
             emitter: None,
             flip_normals: false,

@@ -119,5 +119,5 @@ fn mesh_geometry(obj: &Object, mut mesh: TriangleMesh, to_world: Mat4) -> Result
         }
     }
     let area = mesh_area_distribution(&mesh).ok_or_else(|| obj.error("shape has zero surface area"))?;
-    Ok(ShapeGeometry::Mesh { mesh, area })
+    Ok(ShapeGeometry::mesh(mesh, area))
 }

@@ -118,7 +118,7 @@ fn embree_agrees_with_the_built_in_bvh_on_every_reference_scene() {
 fn mesh_shape(mesh: TriangleMesh) -> Shape {
     let area = render::geometry::mesh_area_distribution(&mesh).unwrap();
     Shape {
-        geometry: ShapeGeometry::Mesh { mesh, area },
+        geometry: ShapeGeometry::mesh(mesh, area),
         material: 0,
         emitter: None,
         flip_normals: false,
