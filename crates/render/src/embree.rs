@@ -165,16 +165,13 @@ struct Api {
     _library: libloading::Library,
 }
 
-/// The library's file names tried in turn (`TESSERA_EMBREE` first when set).
+/// The library's file names tried in turn: the one `TESSERA_EMBREE` names alone when it is set
+/// (a path given on purpose is not silently replaced by another copy), else Debian's names.
 fn candidates() -> Vec<String> {
-    let mut names = Vec::new();
-    if let Ok(path) = std::env::var("TESSERA_EMBREE") {
-        if !path.is_empty() {
-            names.push(path);
-        }
+    match std::env::var("TESSERA_EMBREE") {
+        Ok(path) if !path.is_empty() => vec![path],
+        _ => vec!["libembree3.so.3".to_string(), "libembree3.so".to_string()],
     }
-    names.extend(["libembree3.so.3".to_string(), "libembree3.so".to_string()]);
-    names
 }
 
 impl Api {

@@ -690,3 +690,51 @@ fn inputs_built_to_exhaust_memory_stay_small() {
         assert!(peak_mib < 400.0, "{args:?} peaked at {peak_mib:.0} MiB");
     }
 }
+
+/// `--accel`: each backend renders the scene and says which traced the rays; without the
+/// library (`TESSERA_EMBREE` naming a file that is not there) `embree` is an error naming the
+/// file and the install script, and `auto` falls back to the built-in BVH.
+#[test]
+fn accel_backends_render_and_say_which_traced_the_rays() {
+    let dir = temp_dir("accel");
+    let scene = refs_scene("cbox.xml");
+    let render = |accel: &str, embree: Option<&str>| {
+        let mut cmd = tessera();
+        cmd.current_dir(&dir).arg("render").arg(&scene).args(["--spp", "2", "--accel", accel]);
+        cmd.args(["--out", &format!("{accel}.exr"), "--stats-json", &format!("{accel}.json")]);
+        if let Some(path) = embree {
+            cmd.env("TESSERA_EMBREE", path);
+        }
+        cmd.output().unwrap()
+    };
+    let accel_of = |name: &str| -> String {
+        let stats: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.join(format!("{name}.json"))).unwrap()).unwrap();
+        stats["accel"].as_str().unwrap().to_string()
+    };
+    let out = render("bvh", None);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(accel_of("bvh").starts_with("built-in BVH"), "{}", accel_of("bvh"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("by built-in BVH"));
+
+    let missing = dir.join("no-such-libembree3.so");
+    let missing = missing.to_str().unwrap();
+    let out = render("embree", Some(missing));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    for needle in ["--accel embree", "no-such-libembree3.so", "install-embree.sh"] {
+        assert!(err.contains(needle), "error '{err}' lacks '{needle}'");
+    }
+    assert!(!dir.join("embree.exr").exists(), "a failed render left an image");
+    let out = render("auto", Some(missing));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(accel_of("auto").starts_with("built-in BVH"));
+
+    if render::embree::available().is_ok() {
+        let out = render("embree", None);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(accel_of("embree").starts_with("Embree 3."), "{}", accel_of("embree"));
+    } else {
+        eprintln!("accel_backends_render_and_say_which_traced_the_rays: Embree part skipped (not installed)");
+    }
+}
