@@ -181,7 +181,7 @@ impl Api {
             // SAFETY: loading Embree runs its initialisers, which only set up its own state.
             match unsafe { libloading::Library::new(&name) } {
                 Ok(library) => return Api::bind(library).map_err(|e| format!("{name}: {e}")),
-                Err(e) => tried.push(format!("{name}: {e}")),
+                Err(e) => tried.push(e.to_string()),
             }
         }
         Err(format!("Embree 3 is not installed ({})", tried.join("; ")))
