@@ -1,12 +1,12 @@
 //! Which ray-query backend a scene's [`Intersector`] is: the built-in BVH ([`Accel`]) or
 //! Embree ([`crate::embree`]), chosen by `--accel` (auto by default).
 
-use crate::geometry::{Accel, Intersector, Shape, ShapeGeometry};
+use crate::geometry::{Accel, Intersector, Shape};
 
 /// Which ray-query backend scenes are built with ([`build_intersector`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
-    /// Embree when its library loads and the scene has triangles, else the built-in BVH.
+    /// Embree when its library loads, else the built-in BVH.
     #[default]
     Auto,
     /// The built-in BVH ([`Accel`]) always.
@@ -62,17 +62,16 @@ pub fn backend() -> Backend {
 }
 
 /// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
-/// loads and the scene has a triangle, else the built-in BVH (also when Embree fails, with a
-/// warning on stderr); an error when [`Backend::Embree`] is asked for and cannot be had, or when
+/// loads (it is the faster on every scene measured: triangles alone, spheres alone, both), else
+/// the built-in BVH (also when Embree fails, with a warning on stderr); an error when [`Backend::Embree`] is asked for and cannot be had, or when
 /// the built-in BVH cannot hold the scene.
 pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<Box<dyn Intersector>, String> {
-    let has_triangles = shapes.iter().any(|s| matches!(s.geometry, ShapeGeometry::Mesh { .. }));
     match backend {
         Backend::Bvh => Ok(Box::new(Accel::build(shapes)?)),
         Backend::Embree => crate::embree::EmbreeAccel::build(shapes)
             .map(|a| Box::new(a) as Box<dyn Intersector>)
             .map_err(|e| format!("--accel embree: {e} (scripts/install-embree.sh installs it)")),
-        Backend::Auto if has_triangles && crate::embree::available().is_ok() => {
+        Backend::Auto if crate::embree::available().is_ok() => {
             match crate::embree::EmbreeAccel::build(shapes) {
                 Ok(a) => Ok(Box::new(a)),
                 Err(e) => {
