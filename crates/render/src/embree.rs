@@ -321,56 +321,66 @@ unsafe fn only_shape(context: *const IntersectContext) -> Option<u32> {
     }
 }
 
-/// Intersect callback of a sphere or disk: for each valid lane of the N structure-of-arrays
-/// rays (12 arrays of ray fields, then the hit's), a hit nearer than the ray's far end becomes
-/// its hit. A query restricted to another shape ignores it (Embree applies its context filter to
-/// triangles only).
+/// Field `k` of lane `i` of a callback's N structure-of-arrays rays: the ray's 12 fields
+/// (origin, near end, direction, time, far end at 8, mask, id, flags), then the hit's (normal,
+/// u, v, primitive id at 17, geometry id, instance id).
+///
+/// # Safety
+/// `args` comes from Embree, `k` < 20 for an intersect callback (< 12 for occluded), `i` < N.
+#[inline]
+unsafe fn field(args: &UserArgs, k: usize, i: usize) -> *mut f32 {
+    // SAFETY: within the N-lane arrays Embree passed.
+    unsafe { args.rays.add(k * args.n as usize + i) }
+}
+
+/// The distance at which valid lane `i` meets the callback's shape within its interval.
+///
+/// # Safety
+/// As [`field`]; the user pointer is the `Analytic` set at build.
+#[inline]
+unsafe fn lane_hit(args: &UserArgs, i: usize) -> Option<f32> {
+    // SAFETY: as documented.
+    unsafe {
+        if *args.valid.add(i) == 0 {
+            return None;
+        }
+        let shape = &*(args.geometry_user_ptr as *const Analytic);
+        let f = |k| *field(args, k, i);
+        shape.intersect(Vec3::new(f(0), f(1), f(2)), Vec3::new(f(4), f(5), f(6)), f(3), f(8))
+    }
+}
+
+/// Intersect callback of a sphere or disk: a valid lane that meets it nearer than its far end
+/// takes it as its hit. A query restricted to another shape ignores it (Embree applies its
+/// context filter to triangles only).
 unsafe extern "C" fn analytic_intersect(args: *const UserArgs) {
-    // SAFETY: Embree passes N live lanes in its documented SOA layout and the user pointer set
-    // at build.
+    // SAFETY: Embree passes live arguments with N lanes of ray and hit fields.
     unsafe {
         let args = &*args;
         if only_shape(args.context).is_some_and(|s| s != args.geom_id) {
             return;
         }
-        let shape = &*(args.geometry_user_ptr as *const Analytic);
-        let n = args.n as usize;
-        let f = |k: usize, i: usize| args.rays.add(k * n + i);
-        for i in 0..n {
-            if *args.valid.add(i) == 0 {
-                continue;
-            }
-            let o = Vec3::new(*f(0, i), *f(1, i), *f(2, i));
-            let d = Vec3::new(*f(4, i), *f(5, i), *f(6, i));
-            let Some(t) = shape.intersect(o, d, *f(3, i), *f(8, i)) else { continue };
-            *f(8, i) = t;
-            // Hit: Ng (3 arrays), u, v, primID, geomID, instID, after the ray's 12.
+        for i in 0..args.n as usize {
+            let Some(t) = lane_hit(args, i) else { continue };
+            *field(args, 8, i) = t;
             for k in 12..17 {
-                *f(k, i) = 0.0;
+                *field(args, k, i) = 0.0;
             }
-            *(f(17, i) as *mut u32) = args.prim_id;
-            *(f(18, i) as *mut u32) = args.geom_id;
-            *(f(19, i) as *mut u32) = (*args.context).inst_id[0];
+            *(field(args, 17, i) as *mut u32) = args.prim_id;
+            *(field(args, 18, i) as *mut u32) = args.geom_id;
+            *(field(args, 19, i) as *mut u32) = (*args.context).inst_id[0];
         }
     }
 }
 
 /// Occluded callback of a sphere or disk: a blocked lane's far end becomes −∞.
 unsafe extern "C" fn analytic_occluded(args: *const UserArgs) {
-    // SAFETY: as in `analytic_intersect` (the ray arrays alone).
+    // SAFETY: Embree passes live arguments with N lanes of ray fields.
     unsafe {
         let args = &*args;
-        let shape = &*(args.geometry_user_ptr as *const Analytic);
-        let n = args.n as usize;
-        let f = |k: usize, i: usize| args.rays.add(k * n + i);
-        for i in 0..n {
-            if *args.valid.add(i) == 0 {
-                continue;
-            }
-            let o = Vec3::new(*f(0, i), *f(1, i), *f(2, i));
-            let d = Vec3::new(*f(4, i), *f(5, i), *f(6, i));
-            if shape.intersect(o, d, *f(3, i), *f(8, i)).is_some() {
-                *f(8, i) = f32::NEG_INFINITY;
+        for i in 0..args.n as usize {
+            if lane_hit(args, i).is_some() {
+                *field(args, 8, i) = f32::NEG_INFINITY;
             }
         }
     }
