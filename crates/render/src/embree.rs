@@ -392,6 +392,7 @@ pub struct EmbreeAccel {
     device: Device,
     scene: Scene,
     /// What the user geometries' callbacks read (boxed: Embree keeps their addresses).
+    #[allow(clippy::vec_box)]
     _analytic: Vec<Box<Analytic>>,
     /// The spheres and disks again, for [`Intersector::intersect_shape`] on one of them (`None`
     /// when the scene has none).
