@@ -731,11 +731,21 @@ fn vector_op(op: MathOp, ins: &[Filtered], fp: &Footprint) -> Filtered {
 }
 
 pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
+    let mut out = Filtered::zero(ty);
+    eval_into(op, ty, ins, ctx, &mut out);
+    out
+}
+
+/// [`eval`] written into `out` channel by channel: a value built in a temporary and copied whole
+/// is read back across the temporary's fresh, narrower stores (a store-forwarding stall per
+/// node, most of a cheap node's cost).
+#[inline]
+pub(crate) fn eval_into(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx, out: &mut Filtered) {
     let fp = ctx.fp;
     let n = ty.channels();
-    let mut out = Filtered::zero(ty);
+    *out = Filtered::zero(ty);
     match op {
-        MathOp::Dot | MathOp::Magnitude | MathOp::Distance => out = vector_op(*op, ins, fp),
+        MathOp::Dot | MathOp::Magnitude | MathOp::Distance => *out = vector_op(*op, ins, fp),
         MathOp::Normalize => {
             let a = &ins[0];
             for k in 0..n {
@@ -749,10 +759,9 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
                 });
             }
         }
-        MathOp::Switch => switch(ins[10].ch[0], &ins[..10], ty, &mut out),
+        MathOp::Switch => switch(ins[10].ch[0], &ins[..10], ty, out),
         MathOp::And | MathOp::Or | MathOp::Xor | MathOp::Not => {
             out.ch[0] = logic(*op, &ins[0].ch[0], ins.get(1).map(|i| &i.ch[0]));
-            return out;
         }
         MathOp::IfGreater | MathOp::IfGreaterEq | MathOp::IfEqual => {
             let integral = ins[0].ty != ValueType::Float;
@@ -760,10 +769,10 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
             if ty == ValueType::Boolean {
                 // The boolean variants output the comparison itself.
                 out.ch[0] = p;
-                return out;
-            }
-            for k in 0..n {
-                out.ch[k] = mix(ins[3].at(k), ins[2].at(k), p, fp);
+            } else {
+                for k in 0..n {
+                    out.ch[k] = mix(ins[3].at(k), ins[2].at(k), p, fp);
+                }
             }
         }
         _ => {
@@ -776,5 +785,4 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
             }
         }
     }
-    out
 }

@@ -294,25 +294,29 @@ pub(crate) struct Ctx<'a> {
 /// each copy read back across their fresh stores (a store-forwarding stall per node).
 #[inline]
 pub(crate) fn eval_into(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx, out: &mut Filtered) {
-    *out = match op {
-        Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
-        Op::Noise(n) => noise::eval(n, ty, ins, ctx),
-        Op::Noise3d(n) => noise::eval3d(n, ty, ins, ctx),
-        Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
-        Op::Shape(s) => shape::eval(s, ty, ins, ctx),
-        Op::Math(m) => math::eval(m, ty, ins, ctx),
-        Op::Channel(c) => channel::eval(c, ty, ins, ctx),
-        Op::Color(c) => color::eval(c, ty, ins, ctx),
-        Op::Composite(c) => composite::eval(c, ty, ins, ctx),
-        Op::Vector(v) => vector::eval(v, ty, ins, ctx),
-        Op::Image(t) => image::eval(t, ty, ins, ctx),
-        Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
-        Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
-        Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
-        Op::Flake(f) => flake::eval(f, ty, ins, ctx),
-        Op::Normal(n) => normal::eval(n, ty, ins, ctx),
-        Op::Default(_) => ins[0],
-    };
+    if let Op::Math(m) = op {
+        math::eval_into(m, ty, ins, ctx, out);
+    } else {
+        *out = match op {
+            Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
+            Op::Noise(n) => noise::eval(n, ty, ins, ctx),
+            Op::Noise3d(n) => noise::eval3d(n, ty, ins, ctx),
+            Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
+            Op::Shape(s) => shape::eval(s, ty, ins, ctx),
+            Op::Math(m) => math::eval(m, ty, ins, ctx),
+            Op::Channel(c) => channel::eval(c, ty, ins, ctx),
+            Op::Color(c) => color::eval(c, ty, ins, ctx),
+            Op::Composite(c) => composite::eval(c, ty, ins, ctx),
+            Op::Vector(v) => vector::eval(v, ty, ins, ctx),
+            Op::Image(t) => image::eval(t, ty, ins, ctx),
+            Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
+            Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
+            Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
+            Op::Flake(f) => flake::eval(f, ty, ins, ctx),
+            Op::Normal(n) => normal::eval(n, ty, ins, ctx),
+            Op::Default(_) => ins[0],
+        };
+    }
     if ctx.point {
         for c in out.ch.iter_mut() {
             c.grad = glam::Vec2::ZERO;
