@@ -74,8 +74,8 @@
 //!   `E ≪ F` off normal incidence, and at low roughness lets the sum exceed 1 slightly, since
 //!   there `E` is up to ~2 % above `F` near normal incidence.)
 //!   `E` comes from a 32 × 21 × 41 table over (√cos θ, √roughness, a function of
-//!   (η − 1)/(η + 1)) built once per process on first use (≈ 50 ms in release; see
-//!   [`albedo_table_stats`]), read trilinearly; its error is ≤ 2.4e-3 for η > 1 and up to
+//!   (η − 1)/(η + 1)), computed by quadrature once and embedded in the binary
+//!   (`albedo_table.bin`, which `regenerate_albedo_table` rewrites), read trilinearly; its error is ≤ 2.4e-3 for η > 1 and up to
 //!   ~2e-2 for η < 1 (where `E` has an edge at the critical angle). `E_avg` is integrated from
 //!   the same interpolant, so the normalisation is exact.
 //!
@@ -473,7 +473,9 @@ const N_ROUGH: usize = 21;
 /// the square root puts nodes densely near η = 1, where the grazing peak of `E` narrows.
 const N_ETA: usize = 41;
 /// Visible-normal quadrature per table entry: midpoint rule on (u_φ ∈ [0, ½), u_z ∈ [0, 1)).
+#[cfg(test)]
 const Q_PHI: usize = 16;
+#[cfg(test)]
 const Q_Z: usize = 32;
 
 struct AlbedoTable {
@@ -485,8 +487,19 @@ struct AlbedoTable {
 
 static ALBEDO_TABLE: OnceLock<AlbedoTable> = OnceLock::new();
 
+/// The table's entries as [`entries`] computes them, little-endian `f32` in the order of
+/// [`AlbedoTable::e`]: computing them took 40 ms of every process that renders a
+/// `standard_surface` (on two cores), a sixth of a small render; reading them takes
+/// microseconds. The test `embedded_albedo_table_is_what_the_quadrature_gives` recomputes them.
+const EMBEDDED_ENTRIES: &[u8] = include_bytes!("albedo_table.bin");
+
 fn table() -> &'static AlbedoTable {
-    ALBEDO_TABLE.get_or_init(build_table)
+    ALBEDO_TABLE.get_or_init(|| {
+        let e: Vec<f32> =
+            EMBEDDED_ENTRIES.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        assert_eq!(e.len(), N_ROUGH * N_ETA * N_MU, "albedo_table.bin does not match the table's size");
+        AlbedoTable { avg: averages(&e), e }
+    })
 }
 
 /// Largest `|q|`, `q = (η − 1)/(η + 1)`, of the table (η = 4 or ¼).
@@ -499,6 +512,7 @@ fn eta_to_z(eta: f32) -> f32 {
     (q.abs() / Q_MAX).min(1.0).sqrt().copysign(q)
 }
 
+#[cfg(test)]
 fn eta_node(i: usize) -> f32 {
     if i == (N_ETA - 1) / 2 {
         return 1.0; // exactly index-matched in the middle (the range is symmetric)
@@ -511,6 +525,7 @@ fn eta_node(i: usize) -> f32 {
 /// `E(μ)` of GGX reflection with Fresnel at IOR `eta_k` for every `k`, by midpoint quadrature
 /// of `E_m~D_wi[F(wi·m) G1(wo, m)]` over the visible-normal parametrisation (mirror-symmetric in
 /// φ, so half the azimuths suffice).
+#[cfg(test)]
 fn directional_albedo(md: &Microfacet, mu: f32, etas: &[f32], out: &mut [f64]) {
     let wi = Vec3::new((1.0 - mu * mu).max(0.0).sqrt(), 0.0, mu);
     out.iter_mut().for_each(|o| *o = 0.0);
@@ -539,12 +554,11 @@ fn directional_albedo(md: &Microfacet, mu: f32, etas: &[f32], out: &mut [f64]) {
     out.iter_mut().for_each(|o| *o /= n);
 }
 
-/// Builds the table, its roughness rows spread over the machine's cores: it is built on first
-/// use, inside a render, where every other worker waits for it (one core took about 50 ms, a
-/// sixth of a small render). Scoped threads rather than the render's pool, whose other workers
-/// are the ones waiting. Each entry is computed alone, so the table is the same whatever the
-/// thread count.
-fn build_table() -> AlbedoTable {
+/// The table's entries by quadrature, its roughness rows spread over the machine's cores (each
+/// entry is computed alone, so the table is the same whatever the thread count). Embedded in
+/// the binary ([`EMBEDDED_ENTRIES`]); run again by the tests.
+#[cfg(test)]
+fn entries() -> Vec<f32> {
     let etas: Vec<f32> = (0..N_ETA).map(eta_node).collect();
     let mut e = vec![0.0f32; N_ROUGH * N_ETA * N_MU];
     let row = |ir: usize, out: &mut [f32]| {
@@ -577,12 +591,16 @@ fn build_table() -> AlbedoTable {
             });
         }
     });
+    e
+}
+
+/// `E_avg` of every (roughness, IOR) row of entries `e`.
+fn averages(e: &[f32]) -> Vec<f32> {
     // 2∫ μ L dμ of the interpolant L, linear in x = √μ between nodes: with μ = x²,
     // ∫ 2μ L dμ = ∫ 4x³ L(x) dx, and on [a, b] with L = y_a + (y_b − y_a)(x − a)/h,
     // = y_a (b⁴ − a⁴) + (y_b − y_a)/h · [⅘ (b⁵ − a⁵) − a (b⁴ − a⁴)].
     let h = 1.0 / (N_MU - 1) as f64;
-    let avg = e
-        .chunks(N_MU)
+    e.chunks(N_MU)
         .map(|row| {
             let mut s = 0.0f64;
             for i in 0..N_MU - 1 {
@@ -593,8 +611,7 @@ fn build_table() -> AlbedoTable {
             }
             s as f32
         })
-        .collect();
-    AlbedoTable { e, avg }
+        .collect()
 }
 
 /// The bilinear (roughness, ln η) position of one material in the table, and its `E_avg`.
@@ -642,8 +659,7 @@ impl AlbedoLookup {
     }
 }
 
-/// Forces the albedo table to be built and reports its size (entries) — for start-up code that
-/// prefers to pay the one-off cost (tens of milliseconds) before rendering.
+/// Reads the embedded albedo table and reports its size (entries).
 pub fn albedo_table_stats() -> usize {
     table().e.len()
 }
@@ -651,6 +667,29 @@ pub fn albedo_table_stats() -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The embedded entries are the quadrature's, bit for bit where the machine's maths library
+    /// agrees with the one that wrote them, and within 1e-6 anywhere.
+    #[test]
+    fn embedded_albedo_table_is_what_the_quadrature_gives() {
+        let fresh = entries();
+        let embedded = &table().e;
+        assert_eq!(fresh.len(), embedded.len());
+        let worst = fresh.iter().zip(embedded).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        let same = fresh.iter().zip(embedded).filter(|(a, b)| a.to_bits() == b.to_bits()).count();
+        println!("albedo table: {same} of {} entries bit-identical, worst difference {worst:e}", fresh.len());
+        assert!(worst <= 1e-6, "albedo_table.bin is stale (worst difference {worst:e}): run regenerate_albedo_table");
+    }
+
+    /// Rewrites `albedo_table.bin` after a change to the quadrature or the table's nodes:
+    /// `cargo test --release -p render --lib regenerate_albedo_table -- --ignored`.
+    #[test]
+    #[ignore]
+    fn regenerate_albedo_table() {
+        let bytes: Vec<u8> = entries().iter().flat_map(|v| v.to_le_bytes()).collect();
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/bsdf/albedo_table.bin");
+        std::fs::write(&path, bytes).unwrap();
+    }
 
     #[test]
     fn bsdf_standard_surface_artistic_ior() {
