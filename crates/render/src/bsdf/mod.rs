@@ -324,6 +324,7 @@ impl Default for BsdfDesc {
 
 impl BsdfDesc {
     /// Evaluates the textures at the shading point (no allocation).
+    #[inline]
     pub fn at(&self, ctx: &ShadeContext) -> Bsdf {
         let model = match self {
             BsdfDesc::TwoSided(inner) => return inner.at(ctx).two_sided(),

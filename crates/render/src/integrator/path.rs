@@ -487,6 +487,7 @@ fn event_of(bs: &BsdfSample) -> Event {
 
 /// The material's BSDF at a hit and the shading frame it is evaluated in (bent by a
 /// graph-driven normal).
+#[inline]
 fn shade_bsdf(material: &Material, si: &SurfaceInteraction, ctx: &ShadeContext) -> (Bsdf, Frame) {
     let bsdf = material.bsdf.at(ctx);
     let frame = match material.normal_slot {
