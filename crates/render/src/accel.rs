@@ -63,23 +63,22 @@ pub fn backend() -> Backend {
 
 /// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
 /// loads (it is the faster on every scene measured: triangles alone, spheres alone, both), else
-/// the built-in BVH (also when Embree fails, with a warning on stderr); an error when [`Backend::Embree`] is asked for and cannot be had, or when
-/// the built-in BVH cannot hold the scene.
+/// the built-in BVH (also when Embree fails, with a warning on stderr); an error when
+/// [`Backend::Embree`] is asked for and cannot be had, or when the built-in BVH cannot hold the
+/// scene.
 pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<Box<dyn Intersector>, String> {
     match backend {
         Backend::Bvh => Ok(Box::new(Accel::build(shapes)?)),
         Backend::Embree => crate::embree::EmbreeAccel::build(shapes)
             .map(|a| Box::new(a) as Box<dyn Intersector>)
             .map_err(|e| format!("--accel embree: {e} (scripts/install-embree.sh installs it)")),
-        Backend::Auto if crate::embree::available().is_ok() => {
-            match crate::embree::EmbreeAccel::build(shapes) {
-                Ok(a) => Ok(Box::new(a)),
-                Err(e) => {
-                    eprintln!("warning: {e}; tracing rays with the built-in BVH instead");
-                    Ok(Box::new(Accel::build(shapes)?))
-                }
+        Backend::Auto if crate::embree::available().is_ok() => match crate::embree::EmbreeAccel::build(shapes) {
+            Ok(a) => Ok(Box::new(a)),
+            Err(e) => {
+                eprintln!("warning: {e}; tracing rays with the built-in BVH instead");
+                Ok(Box::new(Accel::build(shapes)?))
             }
-        }
+        },
         Backend::Auto => Ok(Box::new(Accel::build(shapes)?)),
     }
 }

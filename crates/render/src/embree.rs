@@ -7,9 +7,12 @@
 //!
 //! Embree holds every shape, one geometry per shape whose id is the shape's index: meshes as
 //! triangle geometries (primitive ids are the mesh's triangle indices), spheres and disks as
-//! user geometries whose callbacks run the renderer's own double-precision tests, so one
-//! traversal answers each query. Only the types and functions this file uses are declared,
-//! checked against Embree 3.13's `rtcore*.h`.
+//! user geometries whose callbacks run the renderer's own tests (the sphere's in double
+//! precision), so one traversal answers each closest-hit and occlusion query; the closest hit on
+//! one sphere or disk alone is asked of a small built-in BVH of them. Only the types and
+//! functions this file uses are declared, checked against Embree 3.13's `rtcore*.h`; the library
+//! must be a default build (one instance level, no minimum curve width, filter functions on),
+//! which Debian's is: the first two change the ray and context layouts and cannot be queried.
 
 use crate::geometry::{
     intersect_disk, intersect_sphere, Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry,
@@ -128,6 +131,8 @@ const FORMAT_UINT3: u32 = 0x5003;
 const FORMAT_FLOAT3: u32 = 0x9003;
 const BUILD_QUALITY_HIGH: u32 = 2;
 const SCENE_FLAG_CONTEXT_FILTER_FUNCTION: u32 = 1 << 3;
+/// `RTC_DEVICE_PROPERTY_FILTER_FUNCTION_SUPPORTED`.
+const DEVICE_PROPERTY_FILTER_FUNCTION_SUPPORTED: u32 = 66;
 
 impl IntersectContext {
     /// `rtcInitIntersectContext`: incoherent rays, no filter.
@@ -228,10 +233,15 @@ impl Api {
             return Err("rtcNewDevice failed".into());
         }
         // SAFETY: `device` is a live device.
-        let [major, minor, patch] = [1, 2, 3].map(|p| unsafe { get_device_property(device, p) });
+        let [major, minor, patch, filters] =
+            [1, 2, 3, DEVICE_PROPERTY_FILTER_FUNCTION_SUPPORTED].map(|p| unsafe { get_device_property(device, p) });
         unsafe { (api.release_device)(device) };
         if major != 3 {
             return Err(format!("Embree {major}.{minor}.{patch} found where version 3 is expected"));
+        }
+        if filters == 0 {
+            // `intersect_shape` keeps one shape's hits by a context filter.
+            return Err(format!("Embree {major}.{minor}.{patch} was built without filter functions"));
         }
         api.version = format!("{major}.{minor}.{patch}");
         Ok(api)
@@ -271,7 +281,7 @@ unsafe extern "C" fn keep_one_shape(args: *const FilterArgs) {
 /// A sphere or disk as an Embree user geometry sees it (the callbacks' user pointer).
 enum Analytic {
     Sphere { center: Vec3, radius: f32 },
-    Disk { to_object: Affine3A },
+    Disk { to_object: Affine3A, to_world: Affine3A },
 }
 
 impl Analytic {
@@ -280,12 +290,12 @@ impl Analytic {
     fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
         match self {
             Analytic::Sphere { center, radius } => intersect_sphere(*center, *radius, o, d, tmin, tmax),
-            Analytic::Disk { to_object } => intersect_disk(to_object, o, d, tmin, tmax),
+            Analytic::Disk { to_object, .. } => intersect_disk(to_object, o, d, tmin, tmax),
         }
     }
 }
 
-/// Bounds callback of a sphere or disk: the box of the built-in BVH ([`Accel`] builds the same).
+/// Bounds callback of a sphere or disk: the box the built-in BVH gives it ([`Accel::build`]).
 unsafe extern "C" fn analytic_bounds(args: *const BoundsArgs) {
     // SAFETY: Embree passes the user pointer set at build (a live `Analytic` owned by the
     // accelerator) and a bounds record to write.
@@ -293,8 +303,7 @@ unsafe extern "C" fn analytic_bounds(args: *const BoundsArgs) {
         let args = &*args;
         let (lo, hi) = match &*(args.geometry_user_ptr as *const Analytic) {
             Analytic::Sphere { center, radius } => (*center - *radius, *center + *radius),
-            Analytic::Disk { to_object } => {
-                let to_world = to_object.inverse();
+            Analytic::Disk { to_world, .. } => {
                 let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
                     .map(|(x, y)| to_world.transform_point3(Vec3::new(x, y, 0.0)));
                 let (lo, hi) =
@@ -308,17 +317,16 @@ unsafe extern "C" fn analytic_bounds(args: *const BoundsArgs) {
     }
 }
 
-/// The query's one shape when it carries [`keep_one_shape`] (`intersect_shape`), else `None`.
+/// The query's one shape when it carries a filter (only `intersect_shape` sets one, always
+/// [`keep_one_shape`]), else `None`.
 ///
 /// # Safety
 /// `context` is a live context passed by Embree to a query of this module.
 #[inline]
 unsafe fn only_shape(context: *const IntersectContext) -> Option<u32> {
-    // SAFETY: contexts with this filter are the first field of a `ShapeContext`.
-    unsafe {
-        let filter = (*context).filter?;
-        (filter as usize == keep_one_shape as FilterFn as usize).then(|| (*(context as *const ShapeContext)).shape)
-    }
+    // SAFETY: contexts with a filter are the first field of a `ShapeContext`, passed by a
+    // pointer to the whole of it.
+    unsafe { (*context).filter.map(|_| (*(context as *const ShapeContext)).shape) }
 }
 
 /// Field `k` of lane `i` of a callback's N structure-of-arrays rays: the ray's 12 fields
@@ -351,8 +359,8 @@ unsafe fn lane_hit(args: &UserArgs, i: usize) -> Option<f32> {
 }
 
 /// Intersect callback of a sphere or disk: a valid lane that meets it nearer than its far end
-/// takes it as its hit. A query restricted to another shape ignores it (Embree applies its
-/// context filter to triangles only).
+/// takes it as its hit. A query restricted to another shape ignores it (Embree applies a
+/// context filter to its own geometry types; a user geometry must apply it itself).
 unsafe extern "C" fn analytic_intersect(args: *const UserArgs) {
     // SAFETY: Embree passes live arguments with N lanes of ray and hit fields.
     unsafe {
@@ -386,7 +394,7 @@ unsafe extern "C" fn analytic_occluded(args: *const UserArgs) {
     }
 }
 
-/// The whole scene in Embree ([`Analytic`] shapes through callbacks).
+/// The whole scene in Embree (spheres and disks through callbacks).
 pub struct EmbreeAccel {
     api: &'static Api,
     device: Device,
@@ -407,9 +415,12 @@ unsafe impl Sync for EmbreeAccel {}
 
 impl Drop for EmbreeAccel {
     fn drop(&mut self) {
-        // SAFETY: both handles were created by this value and are released once.
+        // SAFETY: both handles were created by this value and are released once, the scene
+        // before the user data its geometries point at (the fields drop after this).
         unsafe {
-            (self.api.release_scene)(self.scene);
+            if !self.scene.is_null() {
+                (self.api.release_scene)(self.scene);
+            }
             (self.api.release_device)(self.device);
         }
     }
@@ -445,11 +456,16 @@ impl EmbreeAccel {
                         accel.add_analytic(si, Analytic::Sphere { center: *center, radius: *radius })?;
                         continue;
                     }
-                    ShapeGeometry::Disk { to_object, .. } => {
-                        accel.add_analytic(si, Analytic::Disk { to_object: *to_object })?;
+                    ShapeGeometry::Disk { to_object, to_world, .. } => {
+                        accel.add_analytic(si, Analytic::Disk { to_object: *to_object, to_world: *to_world })?;
                         continue;
                     }
                 };
+                if mesh.indices.is_empty() {
+                    // Nothing to hit (loaded meshes always have triangles; shapes made in code
+                    // may not), and Embree refuses a buffer of no items.
+                    continue;
+                }
                 let geom = (api.new_geometry)(device, GEOMETRY_TYPE_TRIANGLE);
                 if geom.is_null() {
                     return Err(accel.error("rtcNewGeometry"));
@@ -477,8 +493,10 @@ impl EmbreeAccel {
                 accel.triangles += nt;
             }
             (api.commit_scene)(scene);
-            if (api.device_error)(device) != 0 {
-                return Err(accel.error("rtcCommitScene"));
+            // Reading the error clears it: format the message from this one reading.
+            let code = (api.device_error)(device);
+            if code != 0 {
+                return Err(format!("Embree {}: rtcCommitScene failed (error code {code})", api.version));
             }
             if !accel._analytic.is_empty() {
                 accel.analytic_bvh =
@@ -500,9 +518,10 @@ impl EmbreeAccel {
             if geom.is_null() {
                 return Err(self.error("rtcNewGeometry (user)"));
             }
-            let mut boxed = Box::new(shape);
-            let user = &mut *boxed as *mut Analytic as *mut c_void;
-            self._analytic.push(boxed);
+            self._analytic.push(Box::new(shape));
+            // The pointer is taken after the box has moved into place (moving a box asserts it
+            // is the only pointer to its value); boxes keep their address as the vector grows.
+            let user = &mut **self._analytic.last_mut().expect("just pushed") as *mut Analytic as *mut c_void;
             (api.set_geometry_user_primitive_count)(geom, 1);
             (api.set_geometry_user_data)(geom, user);
             (api.set_geometry_bounds_function)(geom, analytic_bounds, std::ptr::null_mut());
@@ -547,8 +566,10 @@ impl EmbreeAccel {
             context: IntersectContext::new(only.map(|_| keep_one_shape as FilterFn)),
             shape: only.unwrap_or(INVALID_ID),
         };
-        // SAFETY: the scene is committed; the ray-hit and context live across the call.
-        unsafe { (self.api.intersect1)(self.scene, &mut context.context, &mut rh) };
+        // SAFETY: the scene is committed; the ray-hit and context live across the call. The
+        // context is passed by a pointer to the whole `ShapeContext` (the filter reads past it).
+        let context = &mut context as *mut ShapeContext as *mut IntersectContext;
+        unsafe { (self.api.intersect1)(self.scene, context, &mut rh) };
         (rh.hit.geom_id != INVALID_ID).then(|| PreliminaryHit {
             t: rh.ray.tfar,
             shape: rh.hit.geom_id,
@@ -572,7 +593,9 @@ fn rtc_ray(ray: &Ray) -> RtcRay {
         tnear: ray.tmin,
         dir: ray.d.to_array(),
         time: 0.0,
-        tfar: ray.tmax,
+        // Embree's triangle test keeps t ≤ tfar; the renderer's intervals are open (t < tmax),
+        // as the built-in BVH and the sphere and disk tests take them.
+        tfar: ray.tmax.next_down(),
         mask: u32::MAX,
         id: 0,
         flags: 0,

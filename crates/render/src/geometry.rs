@@ -1,8 +1,9 @@
 //! Shapes, the acceleration structure and surface interactions.
 //!
 //! Every shape is reduced to primitives (triangles, spheres, disks) in world space. A wide BVH
-//! from the `obvhs` crate indexes them; [`Accel`] hides that crate behind two queries
-//! (closest hit, any hit) so another backend can be swapped in.
+//! from the `obvhs` crate indexes them; [`Accel`] hides that crate behind the [`Intersector`]
+//! queries (closest hit, any hit, closest hit on one shape), behind which Embree
+//! ([`crate::embree`]) is the other backend.
 
 use crate::math::Frame;
 use crate::mesh::TriangleMesh;
@@ -234,9 +235,9 @@ struct TriPrim {
     e2: Vec3A,
 }
 
-/// Ray queries against a scene's primitives: the seam behind which a BVH backend sits. The
-/// renderer uses [`Accel`] (the `obvhs` crate's compressed wide BVH); another backend (Embree,
-/// say) would implement this trait behind a cargo feature and be chosen in the loader.
+/// Ray queries against a scene's primitives: the seam behind which a BVH backend sits, the
+/// built-in [`Accel`] (the `obvhs` crate's compressed wide BVH) or Embree
+/// ([`crate::embree::EmbreeAccel`]), chosen by [`crate::accel::build_intersector`].
 pub trait Intersector: Send + Sync {
     /// The closest hit along `ray`, if any.
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit>;

@@ -103,7 +103,7 @@ pub struct RenderCounts {
     /// Samples with a channel beyond [`crate::film::SAMPLE_LIMIT`], clamped to it.
     pub clamped_samples: u64,
     /// First-hit texture evaluations at a pixel centre's footprint, one per pixel and surface
-    /// (see [`crate::shading::TextureEvaluator::begin_pixel`]).
+    /// (see `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub pixel_texture_evaluations: u64,
     /// Camera samples' first hits that read their pixel's shared textures.
     pub pixel_texture_reads: u64,
@@ -189,7 +189,7 @@ pub struct RenderSettings {
     /// Evaluate every camera sample's first-hit textures at its own footprint. By default the
     /// samples of a pixel that meet the same surface share one evaluation at the pixel
     /// centre's footprint there, when the footprint is centred on the pixel centre anyway (the
-    /// default filter scale; see [`crate::shading::TextureEvaluator::begin_pixel`]).
+    /// default filter scale; see `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub per_sample_textures: bool,
 }
 
