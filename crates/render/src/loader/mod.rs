@@ -310,8 +310,8 @@ impl Builder {
             // Mitsuba renders black without lights; so do we, but say so.
             eprintln!("warning: {}: the scene has no emitters; the image will be black", root.loc);
         }
-        let accel = crate::accel::build_intersector(&self.shapes, crate::accel::backend())
-            .map_err(|e| root.error(e))?;
+        let accel =
+            crate::accel::build_intersector(&self.shapes, crate::accel::backend()).map_err(|e| root.error(e))?;
         let footprints_needed = self.materials.iter().any(|m| !m.graphs.is_empty());
         let masked = self.materials.iter().any(|m| m.bsdf.is_masked());
         for (k, mg) in self.materials.iter_mut().flat_map(|m| m.graphs.iter_mut()).enumerate() {
