@@ -239,11 +239,7 @@ impl<'a, 'i> Importer<'a, 'i> {
                 let n = self.builder.node_type(*node).channels();
                 match channel::output_channel(o).filter(|c| (*c as usize) < n) {
                     Some(c) => Ok(Source::Node { node: *node, channel: Some(c) }),
-                    None => {
-                        let from = qualify(&self.scopes[scope].prefix, at.attribute("name").unwrap_or("?"));
-                        let to = format!("{}.{o}", qualify(&self.scopes[scope].prefix, name));
-                        Err(self.hard(at, LoadErrorKind::Dangling { from, to }))
-                    }
+                    None => Err(self.no_such_output(scope, name, o, at)),
                 }
             }
             _ => Ok(src),
@@ -261,11 +257,17 @@ impl<'a, 'i> Importer<'a, 'i> {
         at: XNode<'a, 'i>,
     ) -> Result<Source, Fail> {
         let Some(o) = output.filter(|o| nodes::flake::output_type(o).is_some()) else {
-            let from = qualify(&self.scopes[scope].prefix, at.attribute("name").unwrap_or("?"));
-            let to = format!("{}.{}", qualify(&self.scopes[scope].prefix, name), output.unwrap_or("?"));
-            return Err(self.hard(at, LoadErrorKind::Dangling { from, to }));
+            return Err(self.no_such_output(scope, name, output.unwrap_or("?"), at));
         };
         self.node_as(scope, name, Some(o))
+    }
+
+    /// The error of input `at` connected to output `output` of node `name`, which has none of
+    /// that name.
+    fn no_such_output(&self, scope: usize, name: &str, output: &str, at: XNode<'a, 'i>) -> Fail {
+        let from = qualify(&self.scopes[scope].prefix, at.attribute("name").unwrap_or("?"));
+        let to = format!("{}.{output}", qualify(&self.scopes[scope].prefix, name));
+        self.hard(at, LoadErrorKind::Dangling { from, to })
     }
 
     /// Creates (once) the library node called `name` in `scope`, and everything upstream of it.
