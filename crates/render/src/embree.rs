@@ -534,11 +534,6 @@ impl EmbreeAccel {
         Ok(())
     }
 
-    /// Triangles held by Embree.
-    pub fn triangles(&self) -> usize {
-        self.triangles
-    }
-
     fn error(&self, what: &str) -> String {
         // SAFETY: the device is live.
         let code = unsafe { (self.api.device_error)(self.device) };

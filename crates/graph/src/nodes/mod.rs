@@ -294,28 +294,25 @@ pub(crate) struct Ctx<'a> {
 /// each copy read back across their fresh stores (a store-forwarding stall per node).
 #[inline]
 pub(crate) fn eval_into(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx, out: &mut Filtered) {
-    if let Op::Math(m) = op {
-        math::eval_into(m, ty, ins, ctx, out);
-    } else {
-        *out = match op {
-            Op::Geometry(g) => geometry::eval(g, ty, ins, ctx),
-            Op::Noise(n) => noise::eval(n, ty, ins, ctx),
-            Op::Noise3d(n) => noise::eval3d(n, ty, ins, ctx),
-            Op::Pattern(p) => pattern::eval(p, ty, ins, ctx),
-            Op::Shape(s) => shape::eval(s, ty, ins, ctx),
-            Op::Math(m) => math::eval(m, ty, ins, ctx),
-            Op::Channel(c) => channel::eval(c, ty, ins, ctx),
-            Op::Color(c) => color::eval(c, ty, ins, ctx),
-            Op::Composite(c) => composite::eval(c, ty, ins, ctx),
-            Op::Vector(v) => vector::eval(v, ty, ins, ctx),
-            Op::Image(t) => image::eval(t, ty, ins, ctx),
-            Op::LatLong(t) => image::eval_latlong(t, ty, ins, ctx),
-            Op::Triplanar(t) => image::eval_triplanar(t, ty, ins, ctx),
-            Op::HexTile(h) => hextile::eval(h, ty, ins, ctx),
-            Op::Flake(f) => flake::eval(f, ty, ins, ctx),
-            Op::Normal(n) => normal::eval(n, ty, ins, ctx),
-            Op::Default(_) => ins[0],
-        };
+    // Math nodes write their channels into `out` themselves; the other families return a value.
+    match op {
+        Op::Math(m) => math::eval_into(m, ty, ins, ctx, out),
+        Op::Geometry(g) => *out = geometry::eval(g, ty, ins, ctx),
+        Op::Noise(n) => *out = noise::eval(n, ty, ins, ctx),
+        Op::Noise3d(n) => *out = noise::eval3d(n, ty, ins, ctx),
+        Op::Pattern(p) => *out = pattern::eval(p, ty, ins, ctx),
+        Op::Shape(s) => *out = shape::eval(s, ty, ins, ctx),
+        Op::Channel(c) => *out = channel::eval(c, ty, ins, ctx),
+        Op::Color(c) => *out = color::eval(c, ty, ins, ctx),
+        Op::Composite(c) => *out = composite::eval(c, ty, ins, ctx),
+        Op::Vector(v) => *out = vector::eval(v, ty, ins, ctx),
+        Op::Image(t) => *out = image::eval(t, ty, ins, ctx),
+        Op::LatLong(t) => *out = image::eval_latlong(t, ty, ins, ctx),
+        Op::Triplanar(t) => *out = image::eval_triplanar(t, ty, ins, ctx),
+        Op::HexTile(h) => *out = hextile::eval(h, ty, ins, ctx),
+        Op::Flake(f) => *out = flake::eval(f, ty, ins, ctx),
+        Op::Normal(n) => *out = normal::eval(n, ty, ins, ctx),
+        Op::Default(_) => *out = ins[0],
     }
     if ctx.point {
         for c in out.ch.iter_mut() {
