@@ -82,6 +82,16 @@ def stats(a):
     return mins, maxs, int((~finite).sum())
 
 
+def require_anisotropy_shim():
+    """Exits unless scripts/gl-anisotropy-shim.c is preloaded (scripts/mtlx-bake-refs.sh does it):
+    without it an `isotropic_variant` would silently be the default bake again."""
+    import ctypes
+    try:
+        ctypes.CDLL(None).tessera_gl_anisotropy_shim
+    except AttributeError:
+        sys.exit("the GL anisotropy shim is not loaded: run this through scripts/mtlx-bake-refs.sh")
+
+
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--res", type=int, default=24)
@@ -216,6 +226,31 @@ def main():
                 "expanded to the attribute's type as GL does ((u, v, 0, 1)): the quad with a geometric property `uv`, "
                 "which TextureBaker itself does not bind",
             }
+        # MaterialX binds images with 16x anisotropic filtering, and llvmpipe takes the
+        # anisotropic footprint from the lookup coordinate's differences inside each 2 x 2 quad,
+        # not from the gradients a shader passes to textureGrad: where those coordinates jump
+        # inside a quad (hex tiling), the lookup averages along a line across the image. Such
+        # shaders are baked again with anisotropy 1 (scripts/gl-anisotropy-shim.c).
+        if "textureGrad(" in pixel:
+            require_anisotropy_shim()
+            os.environ["TESSERA_GL_MAX_ANISOTROPY"] = "1"
+            try:
+                baker.createProgram(shader)
+                idata = capture(baker, w, h, len(names))
+            finally:
+                del os.environ["TESSERA_GL_MAX_ANISOTROPY"]
+            ibake = "%s/%s__isotropic.exr" % (rel, element.replace("/", "__"))
+            write_exr(os.path.join(REFS, ibake), names, idata)
+            imins, imaxs, inon = stats(idata)
+            record["isotropic_variant"] = {
+                "bake": ibake,
+                "min": imins,
+                "max": imaxs,
+                "nonfinite_texels": inon,
+                "how": "same shader and images, bound with GL_TEXTURE_MAX_ANISOTROPY 1 instead of MaterialX's 16: "
+                "the shader passes explicit gradients to textureGrad, which llvmpipe's anisotropic filter ignores "
+                "in favour of the coordinate's differences inside each 2x2 pixel quad",
+            }
         bakes.append(record)
         print("%s %s" % (element, "uniform" if record["uniform"] else "varies"))
 
@@ -234,7 +269,17 @@ def main():
         "failed": failed,
         "skipped": index["skipped"],
     }
-    name = "manifest.json" if not args.only else "manifest-partial.json"
+    if args.only:
+        # Replace the re-baked documents' rows of the whole manifest, keep every other row.
+        old = json.load(open(os.path.join(REFS, "manifest.json")))
+        done = {b["document"] for b in bakes} | {b["document"] for b in failed}
+        for key, new in (("bakes", bakes), ("failed", failed)):
+            kept = [r for r in old[key] if r["document"] not in done]
+            manifest[key] = kept + new
+            order = {e["document"]: k for k, e in enumerate(index["elements"])}
+            manifest[key].sort(key=lambda r: order.get(r["document"], len(order)))
+        bakes, failed = manifest["bakes"], manifest["failed"]
+    name = "manifest.json"
     # One line per bake: small, and a regeneration diffs by bake.
     with open(os.path.join(REFS, name), "w") as f:
         head = {k: v for k, v in manifest.items() if k not in ("bakes", "failed", "skipped")}
