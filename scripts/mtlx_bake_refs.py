@@ -82,6 +82,14 @@ def stats(a):
     return mins, maxs, int((~finite).sum())
 
 
+def variant(data, rel, element, suffix, names, how):
+    """Writes a variant bake of `element` beside its bake and returns its manifest record."""
+    path = "%s/%s__%s.exr" % (rel, element.replace("/", "__"), suffix)
+    write_exr(os.path.join(REFS, path), names, data)
+    mins, maxs, nonfinite = stats(data)
+    return {"bake": path, "min": mins, "max": maxs, "nonfinite_texels": nonfinite, "how": how}
+
+
 def require_anisotropy_shim():
     """Exits unless scripts/gl-anisotropy-shim.c is preloaded (scripts/mtlx-bake-refs.sh does it):
     without it an `isotropic_variant` would silently be the default bake again."""
@@ -191,18 +199,10 @@ def main():
             for a, c in FLAT.items():
                 v2 = re.sub(r"^\s*in vec3 %s;" % a, "const vec3 %s = %s;" % (a, c), v2, flags=re.M)
             baker.createProgram({"vertex": v2, "pixel": pixel})
-            fdata = capture(baker, w, h, len(names))
-            fbake = "%s/%s__flatplane.exr" % (rel, element.replace("/", "__"))
-            write_exr(os.path.join(REFS, fbake), names, fdata)
-            fmins, fmaxs, fnon = stats(fdata)
-            record["flat_plane_variant"] = {
-                "bake": fbake,
-                "min": fmins,
-                "max": fmaxs,
-                "nonfinite_texels": fnon,
-                "how": "same shader, vertex inputs i_normal/i_tangent/i_bitangent replaced by constants N=(0,0,1), "
-                "T=(1,0,0), B=(0,1,0): the flat quad with its frame, which TextureBaker itself does not supply",
-            }
+            record["flat_plane_variant"] = variant(
+                capture(baker, w, h, len(names)), rel, element, "flatplane", names,
+                "same shader, vertex inputs i_normal/i_tangent/i_bitangent replaced by constants N=(0,0,1), "
+                "T=(1,0,0), B=(0,1,0): the flat quad with its frame, which TextureBaker itself does not supply")
         # The quad's one uv stream is i_texcoord_0; a geompropvalue of `uv` reads the attribute
         # i_geomprop_uv, which TextureBaker leaves unbound (GL's default, 0). The variant binds
         # the quad's uv stream there, expanded as GL expands a two-component attribute.
@@ -213,19 +213,11 @@ def main():
             v2 = re.sub(r"^in \w+ i_geomprop_uv;\n", "", vertex, flags=re.M)
             v2 = re.sub(r"\bvd\.i_geomprop_uv = i_geomprop_uv;", "vd.i_geomprop_uv = %s;" % expr, v2)
             baker.createProgram({"vertex": v2, "pixel": pixel})
-            udata = capture(baker, w, h, len(names))
-            ubake = "%s/%s__uvgeomprop.exr" % (rel, element.replace("/", "__"))
-            write_exr(os.path.join(REFS, ubake), names, udata)
-            umins, umaxs, unon = stats(udata)
-            record["uv_geomprop_variant"] = {
-                "bake": ubake,
-                "min": umins,
-                "max": umaxs,
-                "nonfinite_texels": unon,
-                "how": "same shader, vertex input i_geomprop_uv replaced by the quad's uv stream i_texcoord_0, "
+            record["uv_geomprop_variant"] = variant(
+                capture(baker, w, h, len(names)), rel, element, "uvgeomprop", names,
+                "same shader, vertex input i_geomprop_uv replaced by the quad's uv stream i_texcoord_0, "
                 "expanded to the attribute's type as GL does ((u, v, 0, 1)): the quad with a geometric property `uv`, "
-                "which TextureBaker itself does not bind",
-            }
+                "which TextureBaker itself does not bind")
         # MaterialX binds images with 16x anisotropic filtering, and llvmpipe takes the
         # anisotropic footprint from the lookup coordinate's differences inside each 2 x 2 quad,
         # not from the gradients a shader passes to textureGrad: where those coordinates jump
@@ -239,18 +231,11 @@ def main():
                 idata = capture(baker, w, h, len(names))
             finally:
                 del os.environ["TESSERA_GL_MAX_ANISOTROPY"]
-            ibake = "%s/%s__isotropic.exr" % (rel, element.replace("/", "__"))
-            write_exr(os.path.join(REFS, ibake), names, idata)
-            imins, imaxs, inon = stats(idata)
-            record["isotropic_variant"] = {
-                "bake": ibake,
-                "min": imins,
-                "max": imaxs,
-                "nonfinite_texels": inon,
-                "how": "same shader and images, bound with GL_TEXTURE_MAX_ANISOTROPY 1 instead of MaterialX's 16: "
+            record["isotropic_variant"] = variant(
+                idata, rel, element, "isotropic", names,
+                "same shader and images, bound with GL_TEXTURE_MAX_ANISOTROPY 1 instead of MaterialX's 16: "
                 "the shader passes explicit gradients to textureGrad, which llvmpipe's anisotropic filter ignores "
-                "in favour of the coordinate's differences inside each 2x2 pixel quad",
-            }
+                "in favour of the coordinate's differences inside each 2x2 pixel quad")
         bakes.append(record)
         print("%s %s" % (element, "uniform" if record["uniform"] else "varies"))
 
