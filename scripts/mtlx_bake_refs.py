@@ -258,15 +258,13 @@ def main():
         # Replace the re-baked documents' rows of the whole manifest, keep every other row.
         old = json.load(open(os.path.join(REFS, "manifest.json")))
         done = {b["document"] for b in bakes} | {b["document"] for b in failed}
+        order = {e["document"]: k for k, e in enumerate(index["elements"])}
         for key, new in (("bakes", bakes), ("failed", failed)):
-            kept = [r for r in old[key] if r["document"] not in done]
-            manifest[key] = kept + new
-            order = {e["document"]: k for k, e in enumerate(index["elements"])}
+            manifest[key] = [r for r in old[key] if r["document"] not in done] + new
             manifest[key].sort(key=lambda r: order.get(r["document"], len(order)))
         bakes, failed = manifest["bakes"], manifest["failed"]
-    name = "manifest.json"
     # One line per bake: small, and a regeneration diffs by bake.
-    with open(os.path.join(REFS, name), "w") as f:
+    with open(os.path.join(REFS, "manifest.json"), "w") as f:
         head = {k: v for k, v in manifest.items() if k not in ("bakes", "failed", "skipped")}
         f.write(json.dumps(head, indent=1)[:-2] + ",\n")
         for key in ("bakes", "failed", "skipped"):

@@ -33,8 +33,10 @@ struct Case {
     name: String,
     ty: String,
     body: String,
-    /// The type of the driven input (its driver is `upstream_<type>`); for a driver, its node.
-    driven: Option<String>,
+    /// The node the graph outputs.
+    out: &'static str,
+    /// The type of the driven input, whose driver is `upstream_<type>` (`none`: nothing driven).
+    driven: String,
 }
 
 /// The driver of an input of type `ty` (`s` for vector2, else a noise of that type over `s`) and
@@ -99,8 +101,8 @@ fn cases() -> Vec<Case> {
                 None => (String::new(), String::new()),
             };
             let body = format!(r#"{pre}<{category} name="x" type="{ty}">{input}</{category}>"#);
-            let driven = Some(first.map_or("none", |i| i["type"].as_str().unwrap()).to_string());
-            Case { name: format!("{category}_{ty}"), ty, body, driven }
+            let driven = first.map_or("none", |i| i["type"].as_str().unwrap()).to_string();
+            Case { name: format!("{category}_{ty}"), ty, body, out: "x", driven }
         })
         .collect()
 }
@@ -116,11 +118,10 @@ fn node_costs(c: &mut Criterion) {
     // A driver alone is the graph whose output is the driver itself.
     let upstream = DRIVEN.iter().map(|ty| {
         let (pre, src) = driver(ty);
-        Case { name: format!("upstream_{ty}"), ty: ty.to_string(), body: pre, driven: Some(src.to_string()) }
+        Case { name: format!("upstream_{ty}"), ty: ty.to_string(), body: pre, out: src, driven: ty.to_string() }
     });
     for case in upstream.collect::<Vec<_>>().into_iter().chain(cases()) {
-        let out_node = if case.name.starts_with("upstream_") { case.driven.as_deref().unwrap_or("x") } else { "x" };
-        let text = document(&case.ty, &case.body, out_node);
+        let text = document(&case.ty, &case.body, case.out);
         let doc = match Document::parse(&text, "node_costs.mtlx".as_ref(), &LoadOptions::default()) {
             Ok(d) => d,
             Err(e) => {
@@ -184,7 +185,7 @@ fn write_table() {
         if total.iter().all(Option::is_none) {
             continue;
         }
-        let driven = case.driven.unwrap_or_default();
+        let driven = case.driven;
         let base = up.get(driven.as_str()).copied().unwrap_or([Some(0.0); 4]);
         let alone: Vec<Option<f64>> =
             total.iter().zip(base).map(|(t, b)| Some((t.as_ref()? - b.unwrap_or(0.0)).max(0.0))).collect();
