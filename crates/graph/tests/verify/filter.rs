@@ -287,6 +287,15 @@ fn cases() -> Vec<Case> {
         Case { name: "demo (17 nodes)", body: DEMO, ratio: 0.5, coarse: 0.1 },
     ];
     cases.extend(composite_cases());
+    // Added after the others, so that theirs keep the random centres their position gives them.
+    cases.push(Case {
+        // Past size 1 the staggered disks overlap: their union counts, not their sum (and short of
+        // 2/√3 they leave gaps).
+        name: "tiledcircles stag overlapping",
+        body: r#"<tiledcircles name="n" type="color3"><input name="uvtiling" type="vector2" value="3, 3"/><input name="size" type="float" value="1.1"/><input name="staggered" type="boolean" value="true"/></tiledcircles><output name="out" type="color3" nodename="n"/>"#,
+        ratio: 0.5,
+        coarse: 0.1,
+    });
     cases
 }
 

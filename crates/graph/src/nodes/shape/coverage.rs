@@ -135,6 +135,42 @@ impl Prim {
     }
 }
 
+impl Prim {
+    /// Whether `p` lies inside, and a lower bound on its distance to the boundary (exact for
+    /// disks, capsules and strips; for hexagons and rectangles exact inside and at the sides,
+    /// short of it off the corners).
+    fn locate(&self, p: DVec2) -> (bool, f64) {
+        let e = match *self {
+            Prim::Disk { c, r } => (p - c).length() - r,
+            Prim::Hex { c, r } => {
+                // The largest of the three side normals' projections, against the inradius.
+                let d = (p - c).abs();
+                d.x.max(0.5 * d.x + 0.5 * SQRT3 * d.y) - r
+            }
+            Prim::Capsule { a, b, r } => {
+                let ab = b - a;
+                let l2 = ab.length_squared();
+                let h = if l2 > 0.0 { ((p - a).dot(ab) / l2).clamp(0.0, 1.0) } else { 0.0 };
+                (p - a - ab * h).length() - r
+            }
+            Prim::Rect { lo, hi } => (lo.x - p.x).max(p.x - hi.x).max(lo.y - p.y).max(p.y - hi.y),
+            Prim::Strip { n, c, w } => ((n.dot(p) - c).abs() - w) / n.length(),
+        };
+        (e < 0.0, e.abs())
+    }
+}
+
+/// Multiples of the footprint's spread beyond which a boundary no longer counts: a Gaussian of
+/// per-axis spreads `s` puts under `e^{−6.5²/2}` < 1e-9 of its mass farther than `6.5 |s|`
+/// from its centre, correlation or not.
+pub(super) const SETTLED: f64 = 6.5;
+
+/// How far from its centre a footprint of per-axis spreads `s` reaches ([`SETTLED`]).
+#[inline]
+fn reach(s: DVec2) -> f64 {
+    SETTLED * s.length()
+}
+
 /// A convex piece: the intersection of up to three primitives, counted with a sign.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Piece {
@@ -156,7 +192,7 @@ impl Piece {
             out.push(Piece { prims: [Some(Prim::Disk { c: c + d * r, r }), clip, None], sign: 1.0 });
         }
     }
-    fn chord(&self, k: usize, t: f64) -> (f64, f64) {
+    pub(super) fn chord(&self, k: usize, t: f64) -> (f64, f64) {
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for p in self.prims.iter().flatten() {
             let (a, b) = p.chord(k, t);
@@ -165,6 +201,68 @@ impl Piece {
         }
         (lo, hi)
     }
+    /// Whether `p` lies inside, and a lower bound on its distance to the boundary. Inside, the
+    /// nearest of the primitives' boundaries; outside, the farthest of the primitives that
+    /// exclude `p` (the whole piece lies within each, so at least that far).
+    fn locate(&self, p: DVec2) -> (bool, f64) {
+        let (mut near_in, mut far_out) = (f64::INFINITY, None::<f64>);
+        for prim in self.prims.iter().flatten() {
+            let (inside, d) = prim.locate(p);
+            if inside {
+                near_in = near_in.min(d);
+            } else {
+                far_out = Some(far_out.map_or(d, |f| f.max(d)));
+            }
+        }
+        match far_out {
+            Some(d) => (false, d),
+            None => (true, near_in),
+        }
+    }
+    /// `Some(inside)` where everything within `reach` of `m` is inside the piece, or outside it.
+    pub(super) fn settled(&self, m: DVec2, reach: f64) -> Option<bool> {
+        let (inside, d) = self.locate(m);
+        // Written so that a NaN distance is never settled.
+        (d > reach).then_some(inside)
+    }
+
+    /// The piece's coverage under `N(m, diag(s²))` where it needs no quadrature: 0 or 1 where
+    /// no boundary is within `reach` of `m` (a footprint away from every edge), and in closed
+    /// form where one strip's or rectangle's boundary alone is (the other primitives then
+    /// contain the whole footprint): a strip's is the interval mass of `n · X`, a rectangle's
+    /// the product of its axes'. `None` otherwise.
+    fn shortcut(&self, m: DVec2, s: DVec2, reach: f64) -> Option<(f64, DVec2)> {
+        let mut active = None;
+        let mut near = 0;
+        for prim in self.prims.iter().flatten() {
+            let (inside, d) = prim.locate(m);
+            if !(d > reach) {
+                near += 1;
+                active = Some(*prim);
+            } else if !inside {
+                return Some((0.0, DVec2::ZERO));
+            }
+        }
+        if near == 0 {
+            return Some((1.0, DVec2::ZERO));
+        }
+        if near > 1 || !(s.x > 0.0 && s.y > 0.0) {
+            return None;
+        }
+        match active? {
+            Prim::Strip { n, c, w } => {
+                let (q, dq) = interval(c - w, c + w, n.dot(m), (n * s).length());
+                Some((q, n * dq))
+            }
+            Prim::Rect { lo, hi } => {
+                let (qx, dx) = interval(lo.x, hi.x, m.x, s.x);
+                let (qy, dy) = interval(lo.y, hi.y, m.y, s.y);
+                Some((qx * qy, DVec2::new(dx * qy, qx * dy)))
+            }
+            _ => None,
+        }
+    }
+
     fn extent(&self, k: usize) -> (f64, f64) {
         let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
         for p in self.prims.iter().flatten() {
@@ -230,8 +328,14 @@ pub(super) fn interval(lo: f64, hi: f64, m: f64, s: f64) -> (f64, f64) {
     (p.max(0.0), (pdf(a) - pdf(b)) / s)
 }
 
-/// Coverage of the signed pieces under `N(m, diag(s²))`: `(P, ∂P/∂m)`.
+/// Coverage of the signed pieces under `N(m, diag(s²))`: `(P, ∂P/∂m)`. Each piece takes its
+/// [`Piece::shortcut`] where it has one, else the quadrature.
 pub(super) fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    coverage_with(pieces, m, s, true)
+}
+
+/// [`coverage`], with the shortcuts or by quadrature alone (for the tests).
+pub(super) fn coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcuts: bool) -> (f64, DVec2) {
     // Integrate over the narrower axis k; closed form along the other.
     let k = if s.x <= s.y { 0 } else { 1 };
     let o = 1 - k;
@@ -239,7 +343,14 @@ pub(super) fn coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     let (mo, so) = (get(m, o), get(s, o).max(1e-12));
     let mut p = 0.0;
     let mut g = [0.0f64; 2];
+    let reach = reach(s);
     for pc in pieces {
+        if let Some((q, dq)) = shortcuts.then(|| pc.shortcut(m, s, reach)).flatten() {
+            p += pc.sign * q;
+            g[0] += pc.sign * dq.x;
+            g[1] += pc.sign * dq.y;
+            continue;
+        }
         if sk <= 0.0 {
             let (q, dq) = interval(pc.chord(k, mk).0, pc.chord(k, mk).1, mo, so);
             p += pc.sign * q;
@@ -276,7 +387,15 @@ const MAX_UNION: usize = 12;
 /// for up to two spans, 8 for more), only the pieces whose box meets the footprint's taken,
 /// so that each span sees chords that begin and end only at its ends.
 pub(super) fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
+    union_coverage_with(pieces, m, s, true)
+}
+
+/// [`union_coverage`], with the shortcut of settled pieces (one that holds the whole footprint
+/// makes the union 1; one that holds none of it is left out) or by quadrature alone (for the
+/// tests).
+pub(super) fn union_coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcuts: bool) -> (f64, DVec2) {
     debug_assert!(pieces.len() <= MAX_UNION && pieces.iter().all(|p| p.sign == 1.0));
+    let reach = reach(s);
     let k = if s.x <= s.y { 0 } else { 1 };
     let o = 1 - k;
     let (mk, sk) = (get(m, k), get(s, k));
@@ -289,9 +408,16 @@ pub(super) fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec
             let (a, b) = pc.extent(axis);
             a < c + 7.0 * r && b > c - 7.0 * r
         };
-        if meets(k, mk, sk) && meets(o, mo, so) {
-            near[n] = *pc;
-            n += 1;
+        if !(meets(k, mk, sk) && meets(o, mo, so)) {
+            continue;
+        }
+        match shortcuts.then(|| pc.settled(m, reach)).flatten() {
+            Some(true) => return (1.0, DVec2::ZERO),
+            Some(false) => {}
+            None => {
+                near[n] = *pc;
+                n += 1;
+            }
         }
     }
     if n == 0 {

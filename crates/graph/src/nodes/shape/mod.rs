@@ -21,7 +21,12 @@
 //! `∫ φ(y; m_y, s_y) [Φ((hi(y) − mₓ)/sₓ) − Φ((lo(y) − mₓ)/sₓ)] dy` with `[lo(y), hi(y)]` the chord
 //! of `K` at height `y`, integrated over the narrower axis (20-point Gauss–Legendre on the
 //! piece's extent within ±6σ): the sharp direction is in closed form, the quadrature only sees
-//! a Gaussian-smoothed chord length.
+//! a Gaussian-smoothed chord length. Most pieces of a small footprint need no quadrature: where
+//! no boundary of a piece is within 6.5 |σ| of the centre (under 1e-9 of the mass lies beyond),
+//! the piece is wholly in or out, its coverage 1 or 0; where one strip's or rectangle's boundary
+//! alone is, its coverage is in closed form (the interval mass of `n · X`, or a product of two).
+//! The distances are lower bounds (exact for disks, capsules and strips, short of the truth
+//! off a hexagon's or rectangle's corners), so a shortcut is taken only where it is exact.
 //!
 //! The tiled patterns (`crosshatch`, `tiledcircles`, `tiledhexagons`, `tiledcloverleafs`) visit
 //! the cells within ±6σ while the footprint is under 0.1 cells (rows) on either axis. From 0.1
@@ -29,11 +34,13 @@
 //! cell by 2 rows; |k| ≤ 12 per axis, from 256 × 256 point samples made once per pattern and
 //! thread), correlation of the footprint's axes included: every mode is damped by
 //! `e^{−2π² kᵀΣk}`, so at 0.1 cells the modes left out weigh below 1e-5 and at wide footprints
-//! only the mean (the coverage) remains. A footprint wide (over 0.6 cells) along one axis only
+//! only the mean (the coverage) remains; only the modes damped by less than 1e-12 are visited
+//! (found from the quadratic form, not by computing every mode's damping). A footprint wide (over 0.6 cells) along one axis only
 //! and narrow along the other (a grazing view) takes the pattern's average along the wide axis,
 //! a 256-bin profile filtered along the narrow one. Unions are sums of disjoint pieces (inclusion–exclusion
-//! for the crosshatch's overlapping strips), or, for the cloverleafs' overlapping disks, the
-//! merged chords of all pieces at each height.
+//! for the crosshatch's overlapping strips), or, for overlapping disks (the cloverleafs', and
+//! staggered circles' and hexagons' past size 1), the merged chords of all pieces at each
+//! height.
 
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::graph::Source;

@@ -25,6 +25,13 @@ impl Tiled {
         }
     }
 
+    /// Whether odd rows are shifted by half a cell.
+    fn staggered(&self) -> bool {
+        match *self {
+            Tiled::Cross { staggered, .. } | Tiled::Shapes { staggered, .. } => staggered,
+        }
+    }
+
     pub(super) fn point(&self, q: Vec2) -> f32 {
         match *self {
             Tiled::Cross { th, staggered } => crosshatch_point(q, th as f32, staggered),
@@ -74,13 +81,18 @@ impl Tiled {
     }
 
     /// Whether a cell's pieces overlap (cloverleafs: their leaves, and staggered ones each
-    /// other), so that the cell's coverage is that of their union.
+    /// other; staggered circles and hexagons once `size` passes 1, the lattice's spacing), so
+    /// that the cell's coverage is that of their union.
     pub(super) fn overlaps(&self) -> bool {
-        matches!(self, Tiled::Shapes { motif: Motif::Clover, .. })
+        match *self {
+            Tiled::Shapes { motif: Motif::Clover, .. } => true,
+            Tiled::Shapes { size, staggered: true, .. } => size.abs() > 1.0,
+            Tiled::Cross { .. } | Tiled::Shapes { .. } => false,
+        }
     }
 
     /// What identifies the pattern for the memos of its [`Series`] and profiles.
-    fn key(&self) -> (u8, u64) {
+    pub(super) fn key(&self) -> (u8, u64) {
         match *self {
             Tiled::Cross { th, staggered } => (staggered as u8, th.to_bits()),
             Tiled::Shapes { size, staggered, motif } => (2 + staggered as u8 + 2 * motif as u8, size.to_bits()),
@@ -112,6 +124,15 @@ impl Series {
         let b = 2.0 * PI * PI * cov[2] / (py * py);
         let c = 4.0 * PI * PI * cov[1] / (px * py);
         let k = FOURIER_K as i64;
+        // The modes the loop below keeps (damped by 1e-12 or less) lie where the damping's
+        // exponent `a kx² + c kx ky + b ky²` is at most −ln 1e-12 (below `CUT`). Its smallest
+        // value over whole nonzero modes is at least its form's smaller eigenvalue: above the
+        // cut, only the mean (mode 0) is left.
+        const CUT: f64 = 27.64;
+        let lambda_min = 0.5 * (a + b) - (0.25 * (a - b) * (a - b) + 0.25 * c * c).sqrt();
+        if lambda_min > CUT {
+            return (self.c[FOURIER_K][FOURIER_K].0, DVec2::ZERO);
+        }
         // Powers of the unit phase e^{2πi t} for k = −K…K.
         let powers = |t: f64, out: &mut [(f64, f64); FK]| {
             let (sn, cs) = (2.0 * PI * t).sin_cos();
@@ -125,14 +146,32 @@ impl Series {
         let (mut ux, mut uy) = ([(0.0, 0.0); FK], [(0.0, 0.0); FK]);
         powers(m.x.rem_euclid(px) / px, &mut ux);
         powers(m.y.rem_euclid(py) / py, &mut uy);
+        // The kept modes lie in rows |ky| up to √(CUT / (b − c²/4a)), and within a row between
+        // the exponent's roots in kx. Visiting only those (a mode wider on each side, the tests
+        // below still deciding) skips the modes a wide footprint damps away without computing
+        // their damping, and changes no result.
+        let det = b - c * c / (4.0 * a);
+        let bounded = a > 0.0 && det > 0.0;
+        let clamp = |x: f64| (x.max(-(k as f64)).min(k as f64)) as i64;
+        let ky_max = if bounded { clamp((CUT / det).sqrt().floor() + 1.0) } else { k };
         let (mut p, mut gx, mut gy) = (0.0, 0.0, 0.0);
-        for ky in -k..=k {
+        for ky in -ky_max..=ky_max {
             let dy = (-b * (ky * ky) as f64).exp();
             if dy < 1e-12 {
                 continue;
             }
             let (yr, yi) = uy[(ky + k) as usize];
-            for kx in -k..=k {
+            let (kx0, kx1) = if bounded {
+                let fy = ky as f64;
+                let disc = (c * c * fy * fy - 4.0 * a * (b * fy * fy - CUT)).max(0.0).sqrt();
+                (
+                    clamp(((-c * fy - disc) / (2.0 * a)).floor() - 1.0),
+                    clamp(((-c * fy + disc) / (2.0 * a)).ceil() + 1.0),
+                )
+            } else {
+                (-k, k)
+            };
+            for kx in kx0..=kx1 {
                 // One exponent: the quadratic form is ≥ 0, its cross term alone is not.
                 let (fx, fy) = (kx as f64, ky as f64);
                 let d = (-(a * fx * fx + b * fy * fy + c * fx * fy)).exp();
@@ -329,14 +368,18 @@ pub(super) fn tiled(pat: Tiled, ins: &[Filtered], ctx: &mut Ctx) -> Moments {
             return indicator(p.clamp(0.0, 1.0), g, &j);
         }
     }
-    let span = |m: f64, s: f64, unit: f64| {
-        let lo = ((m - 6.0 * s) / unit).floor() as i64 - 1;
-        let hi = ((m + 6.0 * s) / unit).floor() as i64 + 1;
+    // The cells that meet ±6σ (every piece is clipped to its cell): rows of height h, and
+    // cells along a row found from the unshifted grid, one more at the top for rows shifted by
+    // half a cell (cell i of such a row begins at i − ½).
+    let span = |m: f64, s: f64, unit: f64, shift: i64| {
+        let lo = ((m - 6.0 * s) / unit).floor() as i64;
+        let hi = ((m + 6.0 * s) / unit).floor() as i64 + shift;
         let c = (m / unit).floor() as i64;
         (lo.max(c - MAX_CELLS / 2), hi.min(c + MAX_CELLS / 2))
     };
-    let (i0, i1) = span(m.x, s.x, 1.0);
-    let (j0, j1) = span(m.y, s.y, h);
+    let staggered = pat.staggered();
+    let (i0, i1) = span(m.x, s.x, 1.0, staggered as i64);
+    let (j0, j1) = span(m.y, s.y, h, 0);
     thread_local! {
         // The pieces of one cell, reused: nothing is allocated per evaluation.
         static PIECES: std::cell::RefCell<Vec<Piece>> = const { std::cell::RefCell::new(Vec::new()) };
