@@ -493,6 +493,31 @@ impl Graph {
         for k in (0..scratch.order.len()).rev() {
             let id = scratch.order[k];
             let node = &self.nodes[id.0 as usize];
+            if let (Some(op), false) = (node.direct, careful) {
+                // Inputs read where they lie: upstream values (earlier ids: the order is
+                // topological), the node's constants, the texture coordinate.
+                let i = id.0 as usize;
+                let start = scratch.timing_start(i);
+                let (done, rest) = scratch.values.split_at_mut(i);
+                let mut refs: [&Filtered; 8] = [tc; 8];
+                for ((r, s), c) in refs.iter_mut().zip(&node.inputs).zip(node.consts.iter()) {
+                    *r = match s {
+                        Source::Node { node, .. } => &done[node.0 as usize],
+                        Source::Constant(_) => c,
+                        _ => tc,
+                    };
+                }
+                let out = &mut rest[0];
+                nodes::math::eval_channels(op, node.ty, &refs[..node.inputs.len()], fp, out);
+                if point {
+                    for c in out.ch.iter_mut() {
+                        c.grad = Vec2::ZERO;
+                    }
+                }
+                scratch.timing_end(i, start);
+                scratch.stats.evaluations[i] += scratch.instrumented as u64;
+                continue;
+            }
             // Each arm copies straight into the slot: a value assembled in a temporary and copied
             // from there is read back across the temporary's fresh stores (a stall per input).
             for ((slot, s), c) in ins.iter_mut().zip(&node.inputs).zip(node.consts.iter()) {

@@ -58,6 +58,10 @@ pub(crate) struct Node {
     pub consts: Box<[Filtered]>,
     /// Whether the node reads its inputs' gradients even at point footprints (heighttonormal).
     pub reads_gradients: bool,
+    /// A channel-wise math operation ([`nodes::math::is_channelwise`]) of at most 8 inputs that
+    /// are constants, the texture coordinate or whole upstream values: evaluated from its
+    /// inputs where they lie, with no input slots filled.
+    pub direct: Option<nodes::math::MathOp>,
     pub params: Vec<Param>,
     /// This node and every node it depends on, ascending (= topological order), made on first
     /// request ([`Graph::upstream`]): only the nodes evaluations start from (outputs, cached
@@ -327,9 +331,22 @@ impl GraphBuilder {
                 _ => Filtered::zero(ValueType::Float),
             })
             .collect();
+        let direct = match &op {
+            Op::Math(m)
+                if nodes::math::is_channelwise(m)
+                    && srcs.len() <= 8
+                    && srcs.iter().all(|s| {
+                        matches!(s, Source::Constant(_) | Source::Texcoord | Source::Node { channel: None, .. })
+                    }) =>
+            {
+                Some(*m)
+            }
+            _ => None,
+        };
         self.nodes.push(Node {
             name: name.to_string(),
             category: def.category,
+            direct,
             op,
             ty,
             inputs: srcs,

@@ -23,7 +23,7 @@ fn all_finite(m: &Moments) -> bool {
 // f32 result is not finite: huge operands then never make a 0 · ∞ or ∞ − ∞.
 
 /// Estimated covariance of two channels over the footprint.
-#[inline]
+#[inline(always)]
 pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
     let c = fp.quad(a.grad, b.grad);
     let bound = (a.var.max(0.0) * b.var.max(0.0)).sqrt();
@@ -38,7 +38,7 @@ pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
 }
 
 /// `k a + c`.
-#[inline]
+#[inline(always)]
 pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
     let r = Moments { mean: k * a.mean + c, grad: a.grad * k, var: k * k * a.var };
     if all_finite(&r) {
@@ -49,7 +49,7 @@ pub fn affine(a: Moments, k: f32, c: f32) -> Moments {
 }
 
 /// `a + k b`.
-#[inline]
+#[inline(always)]
 pub fn add_scaled(a: Moments, b: Moments, k: f32, fp: &Footprint) -> Moments {
     let c = cov(&a, &b, fp);
     let r = Moments {
@@ -88,7 +88,7 @@ pub fn linear(k: &[f32], xs: &[Moments], fp: &Footprint) -> Moments {
 }
 
 /// `a · b` for jointly Gaussian operands.
-#[inline]
+#[inline(always)]
 pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
     if b.var == 0.0 && b.grad == Vec2::ZERO {
         return affine(a, b.mean, 0.0);
@@ -117,7 +117,7 @@ pub fn mul(a: Moments, b: Moments, fp: &Footprint) -> Moments {
 }
 
 /// `bg + (fg − bg) t`.
-#[inline]
+#[inline(always)]
 pub fn mix(bg: Moments, fg: Moments, t: Moments, fp: &Footprint) -> Moments {
     let d = add_scaled(fg, bg, -1.0, fp);
     add_scaled(bg, mul(d, t, fp), 1.0, fp)

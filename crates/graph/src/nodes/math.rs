@@ -478,6 +478,7 @@ fn power(a: Moments, b: Moments, safe: bool) -> Moments {
 }
 
 /// One channel of a per-channel math node; `ins` are the node's inputs at channel `k`.
+#[inline(always)]
 fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
     use MathOp::*;
     let a = x[0];
@@ -728,6 +729,33 @@ fn vector_op(op: MathOp, ins: &[Filtered], fp: &Footprint) -> Filtered {
         _ => unreachable!(),
     }
     out
+}
+
+/// Whether [`eval_into`] computes `op` channel by channel from its inputs' channels alone (the
+/// arithmetic, comparisons and functions of one value each): then [`eval_channels`] can
+/// compute it from inputs read where they are.
+pub(crate) fn is_channelwise(op: &MathOp) -> bool {
+    use MathOp::*;
+    !matches!(
+        op,
+        Dot | Magnitude | Distance | Normalize | Switch | And | Or | Xor | Not | IfGreater | IfGreaterEq | IfEqual
+    )
+}
+
+/// [`eval_into`] for a [`is_channelwise`] `op` with its inputs by reference (at most 8), the
+/// same arithmetic in the same order: the evaluator hands it the upstream values where they lie
+/// instead of copying each into an input slot first.
+#[inline]
+pub(crate) fn eval_channels(op: MathOp, ty: ValueType, ins: &[&Filtered], fp: &Footprint, out: &mut Filtered) {
+    debug_assert!(is_channelwise(&op) && ins.len() <= 8);
+    *out = Filtered::zero(ty);
+    let mut xs = [Moments::default(); 8];
+    for k in 0..ty.channels() {
+        for (x, i) in xs.iter_mut().zip(ins.iter()) {
+            *x = i.at(k);
+        }
+        out.ch[k] = channel(op, &xs[..ins.len()], fp);
+    }
 }
 
 pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) -> Filtered {
