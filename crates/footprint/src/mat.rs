@@ -133,7 +133,12 @@ pub fn singular_values(m: DMat2) -> (f64, f64) {
 /// `floor` (the common case: no trigonometry) and the decomposition otherwise.
 #[inline]
 pub fn clamped_inverse(m: DMat2, floor: f64) -> DMat2 {
-    let (_, s2) = singular_values(m);
+    clamped_inverse_sv(m, singular_values(m), floor)
+}
+
+/// [`clamped_inverse`] of `m` whose [`singular_values`] are `sv`.
+#[inline]
+pub fn clamped_inverse_sv(m: DMat2, (_, s2): (f64, f64), floor: f64) -> DMat2 {
     if s2.abs() >= floor && s2 != 0.0 {
         m.inverse()
     } else {
@@ -144,7 +149,12 @@ pub fn clamped_inverse(m: DMat2, floor: f64) -> DMat2 {
 /// [`Svd2::pseudo_inverse`] of `m`, with the same fast path as [`clamped_inverse`].
 #[inline]
 pub fn pseudo_inverse(m: DMat2, threshold: f64) -> DMat2 {
-    let (s1, s2) = singular_values(m);
+    pseudo_inverse_sv(m, singular_values(m), threshold)
+}
+
+/// [`pseudo_inverse`] of `m` whose [`singular_values`] are `sv`.
+#[inline]
+pub fn pseudo_inverse_sv(m: DMat2, (s1, s2): (f64, f64), threshold: f64) -> DMat2 {
     if s2.abs() > threshold && s2 != 0.0 {
         m.inverse()
     } else if !(s1 > threshold) {

@@ -24,7 +24,7 @@ pub fn world_covariance(cov: DMat2, v: &Vertex) -> DMat3 {
 /// [`crate::LocalGeometry::uv_jacobian`] (a clamped inverse of `[t b]ᵀ [dpdu dpdv]`, see
 /// [`Vertex::local`]). Symmetric, positive semi-definite, eigenvalues at most `MAX_VARIANCE`.
 pub fn uv_covariance(cov: DMat2, v: &Vertex) -> DMat2 {
-    let j = v.local().uv_jacobian;
+    let j = v.uv_jacobian();
     clamp_covariance(j * cov * j.transpose(), MAX_VARIANCE).cov
 }
 

@@ -80,14 +80,13 @@ impl Vertex {
     ///   from it is zero.
     pub fn local(&self) -> LocalGeometry {
         let (t, b, n) = (self.t, self.b, self.n);
-        let m = DMat2::from_cols(
-            DVec2::new(t.dot(self.dpdu), b.dot(self.dpdu)),
-            DVec2::new(t.dot(self.dpdv), b.dot(self.dpdv)),
-        );
-        let (smax, _) = crate::mat::singular_values(m);
+        let m = self.uv_map();
+        // One decomposition serves both inverses.
+        let sv = crate::mat::singular_values(m);
+        let smax = sv.0;
         let (j_geo, j_uv) = if smax > 0.0 && smax.is_finite() {
             let floor = UV_CONDITION_LIMIT * smax;
-            (crate::mat::pseudo_inverse(m, floor), crate::mat::clamped_inverse(m, floor))
+            (crate::mat::pseudo_inverse_sv(m, sv, floor), crate::mat::clamped_inverse_sv(m, sv, floor))
         } else {
             (DMat2::ZERO, DMat2::ZERO)
         };
@@ -113,6 +112,25 @@ impl Vertex {
             n
         };
         LocalGeometry { tangent_map: [p0, p1], shape, uv_jacobian: j_uv, geometric_normal }
+    }
+
+    /// `M = [t b]ᵀ [dpdu dpdv]`: the tangent-plane offset per uv offset.
+    #[inline]
+    fn uv_map(&self) -> DMat2 {
+        let (t, b) = (self.t, self.b);
+        DMat2::from_cols(DVec2::new(t.dot(self.dpdu), b.dot(self.dpdu)), DVec2::new(t.dot(self.dpdv), b.dot(self.dpdv)))
+    }
+
+    /// [`LocalGeometry::uv_jacobian`] of [`Vertex::local`] alone, without the rest of the local
+    /// geometry (the texture footprint needs only it).
+    pub fn uv_jacobian(&self) -> DMat2 {
+        let m = self.uv_map();
+        let sv = crate::mat::singular_values(m);
+        if sv.0 > 0.0 && sv.0.is_finite() {
+            crate::mat::clamped_inverse_sv(m, sv, UV_CONDITION_LIMIT * sv.0)
+        } else {
+            DMat2::ZERO
+        }
     }
 }
 
@@ -173,6 +191,38 @@ mod tests {
             let (t, b) = orthonormal_basis(n);
             assert!((t.cross(b) - n).length() < 1e-12, "{n}");
             assert!(t.dot(n).abs() < 1e-12 && b.dot(n).abs() < 1e-12);
+        }
+    }
+
+    /// The uv Jacobian alone is the one of the whole local geometry, bit for bit, and inverts
+    /// the uv map where it is well conditioned; degenerate maps (parallel or zero derivatives)
+    /// give the same finite clamped result both ways.
+    #[test]
+    fn uv_jacobian_alone_is_the_local_one() {
+        let n = DVec3::new(0.2, 0.3, 0.9).normalize();
+        let (t, b) = orthonormal_basis(n);
+        let cases = [
+            (t * 0.3 + b * 0.8, t * -0.6 + b * 0.2),
+            (t * 1e3 + n * 0.1, b * 1e-2),
+            (t * 0.5, t * 0.5000001),
+            (t * 0.5, t * 0.5),
+            (DVec3::ZERO, DVec3::ZERO),
+            (t * f64::NAN, b),
+        ];
+        for (dpdu, dpdv) in cases {
+            let v =
+                Vertex { p: DVec3::ZERO, n, t, b, dpdu, dpdv, dndu: DVec3::ZERO, dndv: DVec3::ZERO, uv: DVec2::ZERO };
+            let (alone, local) = (v.uv_jacobian(), v.local().uv_jacobian);
+            assert_eq!(
+                alone.to_cols_array().map(f64::to_bits),
+                local.to_cols_array().map(f64::to_bits),
+                "{dpdu} {dpdv}"
+            );
+            let m = v.uv_map();
+            let (smax, smin) = crate::mat::singular_values(m);
+            if smin.abs() > 1e-3 * smax {
+                assert!((alone * m).abs_diff_eq(DMat2::IDENTITY, 1e-9), "{dpdu} {dpdv}: {}", alone * m);
+            }
         }
     }
 
