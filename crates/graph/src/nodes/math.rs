@@ -477,131 +477,146 @@ fn power(a: Moments, b: Moments, safe: bool) -> Moments {
     }
 }
 
-/// One channel of a per-channel math node; `ins` are the node's inputs at channel `k`.
+/// One channel of a per-channel math node, written to `o`; `x` are the node's inputs at that
+/// channel. Each arm stores its own result: through a shared exit, every result went to a stack
+/// slot field by field and was read back whole (a store-forwarding stall per channel).
 #[inline(always)]
-fn channel(op: MathOp, x: &[Moments], fp: &Footprint) -> Moments {
+fn channel_into(op: MathOp, x: &[Moments], fp: &Footprint, o: &mut Moments) {
     use MathOp::*;
     let a = x[0];
     match op {
-        Add => add_scaled(a, x[1], 1.0, fp),
-        Subtract => add_scaled(a, x[1], -1.0, fp),
-        Multiply => mul(a, x[1], fp),
+        Add => *o = add_scaled(a, x[1], 1.0, fp),
+        Subtract => *o = add_scaled(a, x[1], -1.0, fp),
+        Multiply => *o = mul(a, x[1], fp),
         Divide => {
-            if uniform(&x[1]) {
-                if x[1].mean == 0.0 {
-                    Moments::constant(0.0)
+            *o = {
+                if uniform(&x[1]) {
+                    if x[1].mean == 0.0 {
+                        Moments::constant(0.0)
+                    } else {
+                        affine(a, 1.0 / x[1].mean, 0.0)
+                    }
                 } else {
-                    affine(a, 1.0 / x[1].mean, 0.0)
+                    nary(&[a, x[1]], |p| safe_div(p[0], p[1]))
                 }
-            } else {
-                nary(&[a, x[1]], |p| safe_div(p[0], p[1]))
             }
         }
-        Modulo => modulo(a, x[1], fp),
-        Fract => fract_of(a),
-        Invert => add_scaled(x[1], a, -1.0, fp),
-        Absval => absval(a),
+        Modulo => *o = modulo(a, x[1], fp),
+        Fract => *o = fract_of(a),
+        Invert => *o = add_scaled(x[1], a, -1.0, fp),
+        Absval => *o = absval(a),
         Sign => {
-            if a.var == 0.0 {
-                Moments::constant(if a.mean > 0.0 {
-                    1.0
-                } else if a.mean < 0.0 {
-                    -1.0
+            *o = {
+                if a.var == 0.0 {
+                    Moments::constant(if a.mean > 0.0 {
+                        1.0
+                    } else if a.mean < 0.0 {
+                        -1.0
+                    } else {
+                        0.0
+                    })
                 } else {
-                    0.0
-                })
-            } else {
-                affine(gaussian_step(a, 0.0), 2.0, -1.0)
+                    affine(gaussian_step(a, 0.0), 2.0, -1.0)
+                }
             }
         }
-        Floor => floor_of(a),
-        Ceil => affine(floor_of(affine(a, -1.0, 0.0)), -1.0, 0.0),
+        Floor => *o = floor_of(a),
+        Ceil => *o = affine(floor_of(affine(a, -1.0, 0.0)), -1.0, 0.0),
         // GLSL's round (MaterialX's bakes) sends halves to the even integer.
-        Round if a.var == 0.0 => Moments::constant((a.mean as f64).round_ties_even() as f32),
-        Round => floor_of(affine(a, 1.0, 0.5)),
-        Power => power(a, x[1], false),
-        SafePower => power(a, x[1], true),
-        Sin => sin_of(a, false),
-        Cos => sin_of(a, true),
-        Tan => unary(a, f64::tan, |v| 1.0 / (v.cos() * v.cos())),
-        Asin => unary(a, |v| v.clamp(-1.0, 1.0).asin(), |v| 1.0 / (1.0 - v * v).max(1e-12).sqrt()),
-        Acos => unary(a, |v| v.clamp(-1.0, 1.0).acos(), |v| -1.0 / (1.0 - v * v).max(1e-12).sqrt()),
-        Atan2 => nary(&[a, x[1]], |p| p[0].atan2(p[1])),
-        Sqrt => unary(a, |v| v.max(0.0).sqrt(), |v| if v > 0.0 { 0.5 / v.sqrt() } else { 0.0 }),
-        Ln => unary(a, |v| v.max(1e-30).ln(), |v| 1.0 / v.max(1e-30)),
-        Exp => exp_of(a),
-        TriangleWave => chain(a, tri_moments(a.mean as f64, a.sigma() as f64)),
+        Round if a.var == 0.0 => *o = Moments::constant((a.mean as f64).round_ties_even() as f32),
+        Round => *o = floor_of(affine(a, 1.0, 0.5)),
+        Power => *o = power(a, x[1], false),
+        SafePower => *o = power(a, x[1], true),
+        Sin => *o = sin_of(a, false),
+        Cos => *o = sin_of(a, true),
+        Tan => *o = unary(a, f64::tan, |v| 1.0 / (v.cos() * v.cos())),
+        Asin => *o = unary(a, |v| v.clamp(-1.0, 1.0).asin(), |v| 1.0 / (1.0 - v * v).max(1e-12).sqrt()),
+        Acos => *o = unary(a, |v| v.clamp(-1.0, 1.0).acos(), |v| -1.0 / (1.0 - v * v).max(1e-12).sqrt()),
+        Atan2 => *o = nary(&[a, x[1]], |p| p[0].atan2(p[1])),
+        Sqrt => *o = unary(a, |v| v.max(0.0).sqrt(), |v| if v > 0.0 { 0.5 / v.sqrt() } else { 0.0 }),
+        Ln => *o = unary(a, |v| v.max(1e-30).ln(), |v| 1.0 / v.max(1e-30)),
+        Exp => *o = exp_of(a),
+        TriangleWave => *o = chain(a, tri_moments(a.mean as f64, a.sigma() as f64)),
         Clamp => {
-            if uniform(&x[1]) && uniform(&x[2]) {
-                clamp_const(a, x[1].mean as f64, x[2].mean as f64)
-            } else {
-                min2(max2(a, x[1], fp), x[2], fp)
+            *o = {
+                if uniform(&x[1]) && uniform(&x[2]) {
+                    clamp_const(a, x[1].mean as f64, x[2].mean as f64)
+                } else {
+                    min2(max2(a, x[1], fp), x[2], fp)
+                }
             }
         }
-        Min => min2(a, x[1], fp),
-        Max => max2(a, x[1], fp),
+        Min => *o = min2(a, x[1], fp),
+        Max => *o = max2(a, x[1], fp),
         Smoothstep => {
-            if uniform(&x[1]) && uniform(&x[2]) {
-                smoothstep_const(a, x[1].mean as f64, x[2].mean as f64)
-            } else {
-                nary(&[a, x[1], x[2]], |p| smoothstep_point(p[0], p[1], p[2]))
+            *o = {
+                if uniform(&x[1]) && uniform(&x[2]) {
+                    smoothstep_const(a, x[1].mean as f64, x[2].mean as f64)
+                } else {
+                    nary(&[a, x[1], x[2]], |p| smoothstep_point(p[0], p[1], p[2]))
+                }
             }
         }
         Remap => {
-            if x[1..5].iter().all(uniform) {
-                let (il, ih, ol, oh) = (x[1].mean, x[2].mean, x[3].mean, x[4].mean);
-                // In f32, as MaterialX computes it; equal input bounds divide by zero: 0. A slope
-                // beyond the f32 range is saturated (in f64) instead.
-                let k = if ih == il { 0.0 } else { (oh - ol) / (ih - il) };
-                if k.is_finite() {
-                    affine(a, k, ol - il * k)
+            *o = {
+                if x[1..5].iter().all(uniform) {
+                    let (il, ih, ol, oh) = (x[1].mean, x[2].mean, x[3].mean, x[4].mean);
+                    // In f32, as MaterialX computes it; equal input bounds divide by zero: 0. A slope
+                    // beyond the f32 range is saturated (in f64) instead.
+                    let k = if ih == il { 0.0 } else { (oh - ol) / (ih - il) };
+                    if k.is_finite() {
+                        affine(a, k, ol - il * k)
+                    } else {
+                        let k = safe_div(oh as f64 - ol as f64, ih as f64 - il as f64);
+                        affine(a, k as f32, sat(ol as f64 - il as f64 * k))
+                    }
                 } else {
-                    let k = safe_div(oh as f64 - ol as f64, ih as f64 - il as f64);
-                    affine(a, k as f32, sat(ol as f64 - il as f64 * k))
+                    nary(&x[..5], |p| p[3] + safe_div((p[0] - p[1]) * (p[4] - p[3]), p[2] - p[1]))
                 }
-            } else {
-                nary(&x[..5], |p| p[3] + safe_div((p[0] - p[1]) * (p[4] - p[3]), p[2] - p[1]))
             }
         }
         Range => {
-            let doclamp = x[6].mean >= 0.5;
-            let f = move |p: &[f64]| {
-                let t = safe_div(p[0] - p[1], p[2] - p[1]);
-                let t = power_point(t, safe_div(1.0, p[3]), true);
-                let r = p[4] + t * (p[5] - p[4]);
-                if doclamp {
-                    r.clamp(p[4].min(p[5]), p[4].max(p[5]))
+            *o = {
+                let doclamp = x[6].mean >= 0.5;
+                let f = move |p: &[f64]| {
+                    let t = safe_div(p[0] - p[1], p[2] - p[1]);
+                    let t = power_point(t, safe_div(1.0, p[3]), true);
+                    let r = p[4] + t * (p[5] - p[4]);
+                    if doclamp {
+                        r.clamp(p[4].min(p[5]), p[4].max(p[5]))
+                    } else {
+                        r
+                    }
+                };
+                if x[1..6].iter().all(uniform) {
+                    let p: [f64; 6] =
+                        [0.0, x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64, x[5].mean as f64];
+                    if p[3] == 1.0 && !doclamp {
+                        let k = safe_div(p[5] - p[4], p[2] - p[1]) as f32;
+                        *o = affine(a, k, p[4] as f32 - p[1] as f32 * k);
+                        return;
+                    }
+                    unary(
+                        a,
+                        move |v| {
+                            let mut q = p;
+                            q[0] = v;
+                            f(&q)
+                        },
+                        move |v| {
+                            let h = 1e-4 * (1.0 + v.abs());
+                            let (mut q0, mut q1) = (p, p);
+                            q0[0] = v - h;
+                            q1[0] = v + h;
+                            (f(&q1) - f(&q0)) / (2.0 * h)
+                        },
+                    )
                 } else {
-                    r
+                    nary(&x[..6], f)
                 }
-            };
-            if x[1..6].iter().all(uniform) {
-                let p: [f64; 6] =
-                    [0.0, x[1].mean as f64, x[2].mean as f64, x[3].mean as f64, x[4].mean as f64, x[5].mean as f64];
-                if p[3] == 1.0 && !doclamp {
-                    let k = safe_div(p[5] - p[4], p[2] - p[1]) as f32;
-                    return affine(a, k, p[4] as f32 - p[1] as f32 * k);
-                }
-                unary(
-                    a,
-                    move |v| {
-                        let mut q = p;
-                        q[0] = v;
-                        f(&q)
-                    },
-                    move |v| {
-                        let h = 1e-4 * (1.0 + v.abs());
-                        let (mut q0, mut q1) = (p, p);
-                        q0[0] = v - h;
-                        q1[0] = v + h;
-                        (f(&q1) - f(&q0)) / (2.0 * h)
-                    },
-                )
-            } else {
-                nary(&x[..6], f)
             }
         }
-        Mix => mix(x[1], a, x[2], fp),
+        Mix => *o = mix(x[1], a, x[2], fp),
         IfGreater | IfGreaterEq | IfEqual | Switch | And | Or | Xor | Not => {
             unreachable!("conditionals and logic are evaluated per node")
         }
@@ -754,7 +769,7 @@ pub(crate) fn eval_channels(op: MathOp, ty: ValueType, ins: &[&Filtered], fp: &F
         for (x, i) in xs.iter_mut().zip(ins.iter()) {
             *x = i.at(k);
         }
-        out.ch[k] = channel(op, &xs[..ins.len()], fp);
+        channel_into(op, &xs[..ins.len()], fp, &mut out.ch[k]);
     }
 }
 
@@ -809,7 +824,7 @@ pub(crate) fn eval_into(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut 
                 for (x, i) in xs.iter_mut().zip(ins.iter()) {
                     *x = i.at(k);
                 }
-                out.ch[k] = channel(*op, &xs[..ins.len()], fp);
+                channel_into(*op, &xs[..ins.len()], fp, &mut out.ch[k]);
             }
         }
     }
