@@ -26,7 +26,14 @@ fn all_finite(m: &Moments) -> bool {
 #[inline(always)]
 pub fn cov(a: &Moments, b: &Moments, fp: &Footprint) -> f32 {
     let c = fp.quad(a.grad, b.grad);
-    let bound = (a.var.max(0.0) * b.var.max(0.0)).sqrt();
+    let vv = a.var.max(0.0) * b.var.max(0.0);
+    // Well inside the Cauchy–Schwarz bound (the common case): `c` itself, as the clamp below
+    // would give it (the margin covers the rounding of both squares), without its square root.
+    // A NaN or an overflow fails the test and takes the full path.
+    if c * c <= vv * 0.999_99 && vv <= f32::MAX {
+        return c;
+    }
+    let bound = vv.sqrt();
     if c.is_finite() && bound.is_finite() {
         return c.max(-bound).min(bound);
     }
