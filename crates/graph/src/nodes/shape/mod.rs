@@ -45,7 +45,7 @@
 use super::{inp, types, Ctx, Def, InType, NodeDef, Op, Param};
 use crate::graph::Source;
 use crate::value::{Filtered, Moments, ValueType};
-use coverage::{coverage, interval, union_coverage, Piece, Prim};
+use coverage::{coverage, interval, small_coverage, union_coverage, Piece, Prim};
 use glam::{DVec2, Vec2};
 use tiled::{tiled, Tiled};
 
@@ -415,7 +415,11 @@ pub(crate) fn eval(op: &ShapeOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx)
                 };
                 // A circle only sees r²; the hexagon and the capsule are empty for r ≤ 0.
                 let live = if matches!(op, ShapeOp::Circle) { r != 0.0 } else { r > 0.0 };
-                let (p, dp) = if live { coverage(&[Piece::one(prim)], m, s) } else { (0.0, DVec2::ZERO) };
+                let (p, dp) = match live.then(|| small_coverage(&prim, m, s)) {
+                    None => (0.0, DVec2::ZERO),
+                    Some(Some(small)) => small,
+                    Some(None) => coverage(&[Piece::one(prim)], m, s),
+                };
                 ctx.work.lattice += 1;
                 indicator(p, dp, &j)
             }
