@@ -21,7 +21,9 @@
 //! `∫ φ(y; m_y, s_y) [Φ((hi(y) − mₓ)/sₓ) − Φ((lo(y) − mₓ)/sₓ)] dy` with `[lo(y), hi(y)]` the chord
 //! of `K` at height `y`, integrated over the narrower axis (20-point Gauss–Legendre on the
 //! piece's extent within ±6σ): the sharp direction is in closed form, the quadrature only sees
-//! a Gaussian-smoothed chord length. Most pieces of a small footprint need no quadrature: where
+//! a Gaussian-smoothed chord length. A disk, hexagon or capsule far smaller than its footprint
+//! (every point within 0.02 of the narrower σ of its centre) is instead the density at its
+//! centre times its area, with the second-moment correction (`coverage::small_coverage`). Most pieces of a small footprint need no quadrature: where
 //! no boundary of a piece is within 6.5 |σ| of the centre (under 1e-9 of the mass lies beyond),
 //! the piece is wholly in or out, its coverage 1 or 0; where one strip's or rectangle's boundary
 //! alone is, its coverage is in closed form (the interval mass of `n · X`, or a product of two).
