@@ -81,6 +81,22 @@ pub mod moments;
 pub mod mtlx;
 pub mod nodes;
 pub mod text;
+
+/// What the unit tests share.
+#[cfg(test)]
+pub(crate) mod testing {
+    /// Uniform draws in [0, 1) from a xorshift64 stream seeded with `seed` (not 0): reproducible
+    /// inputs for randomised tests.
+    pub(crate) fn uniform(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+}
 pub mod value;
 
 /// The most nodes a graph may have, after node graphs used as node implementations are

@@ -175,13 +175,7 @@ mod tests {
     /// an unsettled one is spread over the cells the general sums find, whose masses add to 1.
     #[test]
     fn settled_footprints_keep_their_cell() {
-        let mut state = 0x243f_6a88_85a3_08d3u64;
-        let mut rnd = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rnd = crate::testing::uniform(0x243f_6a88_85a3_08d3);
         let (mut seen, mut taken) = (0, 0);
         for _ in 0..20_000 {
             let m = rnd() * 200.0 - 100.0;

@@ -85,24 +85,9 @@ fn worley_with<const D: usize>(
 where
     Dim<D>: Neighbourhood<D>,
 {
-    let c0 = p.map(ifloor);
-    let mut local = p;
-    for (l, c) in local.iter_mut().zip(c0) {
-        *l -= c as f32;
-    }
     let mut d = [1e6f32; 3];
     let mut minpos = [0.0f32; D];
-    Dim::<D>::neighbours(|o| {
-        let mut c = c0;
-        for (c, o) in c.iter_mut().zip(o) {
-            *c = c.wrapping_add(o);
-        }
-        let off = offset(c);
-        let mut cell = [0.0f32; D];
-        for (a, x) in cell.iter_mut().enumerate() {
-            *x = o[a] as f32 + off[a] - local[a];
-        }
-        let dist = cell[1..].iter().fold(cell[0] * cell[0], |acc, x| acc + x * x);
+    each_feature(p, &mut offset, |dist, cell| {
         if dist < d[0] {
             d[2] = d[1];
             d[1] = d[0];
@@ -131,11 +116,15 @@ where
     }
 }
 
-/// The four nearest squared distances of [`worley`]'s search at `p` (the same cells, order and
-/// f32 arithmetic) and the offsets from `p` to the three nearest feature points.
+/// Calls `f(squared distance, offset)` from `p` to the feature point of each of the 3^D cells
+/// around `p`'s (`offset(c)` placing cell `c`'s feature within it), in the search's order and
+/// f32 arithmetic.
 #[inline(always)]
-fn worley_ranked<const D: usize>(p: [f32; D], jitter: f32) -> ([f32; 4], [[f32; D]; 3])
-where
+fn each_feature<const D: usize>(
+    p: [f32; D],
+    mut offset: impl FnMut([i32; D]) -> [f32; D],
+    mut f: impl FnMut(f32, [f32; D]),
+) where
     Dim<D>: Neighbourhood<D>,
 {
     let c0 = p.map(ifloor);
@@ -143,19 +132,31 @@ where
     for (l, c) in local.iter_mut().zip(c0) {
         *l -= c as f32;
     }
-    let mut d = [1e6f32; 4];
-    let mut at = [[0.0f32; D]; 3];
     Dim::<D>::neighbours(|o| {
         let mut c = c0;
         for (c, o) in c.iter_mut().zip(o) {
             *c = c.wrapping_add(o);
         }
-        let off = feature_offset::<D>(c, jitter);
+        let off = offset(c);
         let mut cell = [0.0f32; D];
         for (a, x) in cell.iter_mut().enumerate() {
             *x = o[a] as f32 + off[a] - local[a];
         }
-        let dist = cell[1..].iter().fold(cell[0] * cell[0], |acc, x| acc + x * x);
+        f(cell[1..].iter().fold(cell[0] * cell[0], |acc, x| acc + x * x), cell);
+    });
+}
+
+/// The four nearest squared distances of [`worley`]'s search at `p` (the same cells, order and
+/// f32 arithmetic) and the offsets from `p` to the three nearest feature points.
+#[inline(always)]
+fn worley_ranked<const D: usize>(p: [f32; D], jitter: f32) -> ([f32; 4], [[f32; D]; 3])
+where
+    Dim<D>: Neighbourhood<D>,
+{
+    let mut d = [1e6f32; 4];
+    let mut at = [[0.0f32; D]; 3];
+    let offset = |c| feature_offset::<D>(c, jitter);
+    each_feature(p, offset, |dist, cell| {
         // Insertion into the sorted four, strict as the search's own comparisons.
         let mut k = 4;
         while k > 0 && dist < d[k - 1] {
@@ -589,14 +590,8 @@ mod settled_tests {
     /// cells.
     #[test]
     fn settled_worley_matches_brute_force() {
-        let mut state = 0x1319_8a2e_0370_7344u64;
-        let mut rnd = move || {
-            state ^= state << 13;
-            state ^= state >> 7;
-            state ^= state << 17;
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let mut normal = move |r: &mut dyn FnMut() -> f64| {
+        let mut rnd = crate::testing::uniform(0x1319_8a2e_0370_7344);
+        let normal = move |r: &mut dyn FnMut() -> f64| {
             let (u, v) = (r().max(1e-300), r());
             (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
         };

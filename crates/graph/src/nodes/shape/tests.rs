@@ -25,16 +25,7 @@ fn pieces_match_points() {
             Piece::clover(c.as_dvec2(), 0.35, None, &mut clover);
             let pc4 = union_coverage(&clover, m, s).0;
             bad += ((pc4 - clover_point(q, c, 0.7) as f64).abs() > 0.5) as i32;
-            for pat in [
-                Tiled::Cross { th: 0.1, staggered: false },
-                Tiled::Cross { th: 0.1, staggered: true },
-                Tiled::Shapes { size: 0.7, staggered: false, motif: Motif::Circle },
-                Tiled::Shapes { size: 0.7, staggered: true, motif: Motif::Circle },
-                Tiled::Shapes { size: 0.7, staggered: false, motif: Motif::Hexagon },
-                Tiled::Shapes { size: 0.9, staggered: true, motif: Motif::Hexagon },
-                Tiled::Shapes { size: 0.8, staggered: false, motif: Motif::Clover },
-                Tiled::Shapes { size: 0.9, staggered: true, motif: Motif::Clover },
-            ] {
+            for pat in TEST_PATTERNS {
                 let h = pat.row_height();
                 let (i, j) = ((m.x).floor() as i64, (m.y / h).floor() as i64);
                 let mut pieces = Vec::new();
@@ -58,13 +49,7 @@ fn pieces_match_points() {
 /// Random footprints for the shortcut tests: centres in [−4, 4]², spreads from 1e-5 to 0.3
 /// (log-uniform), aspect 0.2–1.
 fn random_footprints(n: usize) -> Vec<(DVec2, DVec2)> {
-    let mut state = 0x2545_f491_4f6c_dd1du64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = crate::testing::uniform(0x2545_f491_4f6c_dd1d);
     (0..n)
         .map(|_| {
             let m = DVec2::new(rnd() * 8.0 - 4.0, rnd() * 8.0 - 4.0);
@@ -79,7 +64,8 @@ fn random_footprints(n: usize) -> Vec<(DVec2, DVec2)> {
         .collect()
 }
 
-const SHORTCUT_PATTERNS: [Tiled; 8] = [
+/// One of each tiled pattern, staggered or not (staggered circles of size 1.3, which overlap).
+const TEST_PATTERNS: [Tiled; 8] = [
     Tiled::Cross { th: 0.1, staggered: false },
     Tiled::Cross { th: 0.15, staggered: true },
     Tiled::Shapes { size: 0.7, staggered: false, motif: Motif::Circle },
@@ -109,13 +95,7 @@ fn cells_around(pat: Tiled, m: DVec2, mut f: impl FnMut(&[Piece], bool)) {
 /// shortcut settles most pieces of small footprints, so that it is taken where it pays.
 #[test]
 fn settled_pieces_are_constant_over_the_footprint() {
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = crate::testing::uniform(0x9e37_79b9_7f4a_7c15);
     // Inside by the chord at the point's height, as the quadrature counts it.
     let contains = |pc: &Piece, q: DVec2| {
         let (lo, hi) = pc.chord(0, q.x);
@@ -148,7 +128,7 @@ fn settled_pieces_are_constant_over_the_footprint() {
         ] {
             check(&pc);
         }
-        for pat in SHORTCUT_PATTERNS {
+        for pat in TEST_PATTERNS {
             let (i, j) = (m.x.floor() as i64, (m.y / pat.row_height()).floor() as i64);
             let mut pieces = Vec::new();
             pat.pieces(i, j, &mut pieces);
@@ -241,7 +221,7 @@ fn shortcuts_are_as_accurate_as_quadrature() {
         let mut clover = Vec::new();
         Piece::clover(c, 0.35, None, &mut clover);
         both(&clover, true);
-        for pat in SHORTCUT_PATTERNS {
+        for pat in TEST_PATTERNS {
             cells_around(pat, m, &mut both);
         }
     }
@@ -255,13 +235,7 @@ fn shortcuts_are_as_accurate_as_quadrature() {
 /// 1e-2 of the quadrature's scale; and it is used often below its size bound.
 #[test]
 fn small_shapes_match_quadrature() {
-    let mut state = 0x0bad_5eed_1234_5678u64;
-    let mut rnd = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 11) as f64 / (1u64 << 53) as f64
-    };
+    let mut rnd = crate::testing::uniform(0x0bad_5eed_1234_5678);
     let mut used = 0;
     for k in 0..2000 {
         let sx = 10f64.powf(-1.0 + 3.0 * rnd());
