@@ -286,6 +286,13 @@ impl EvalScratch {
         }
     }
 
+    /// Counts node `i`'s evaluation begun at `start` and charges its timing, if it was timed.
+    #[inline]
+    fn counted(&mut self, i: usize, start: Option<std::time::Instant>) {
+        self.timing_end(i, start);
+        self.stats.evaluations[i] += self.instrumented as u64;
+    }
+
     /// The per-bin timings recorded so far.
     pub fn binned_timings(&self) -> &BinnedTimings {
         &self.binned
@@ -510,12 +517,9 @@ impl Graph {
                 let out = &mut rest[0];
                 nodes::math::eval_channels(op, node.ty, &refs[..node.inputs.len()], fp, out);
                 if point {
-                    for c in out.ch.iter_mut() {
-                        c.grad = Vec2::ZERO;
-                    }
+                    nodes::point_gradients(out);
                 }
-                scratch.timing_end(i, start);
-                scratch.stats.evaluations[i] += scratch.instrumented as u64;
+                scratch.counted(i, start);
                 continue;
             }
             // Each arm copies straight into the slot: a value assembled in a temporary and copied
@@ -550,8 +554,7 @@ impl Graph {
             let start = scratch.timing_start(i);
             let mut ctx = Ctx { fp, point, work: &mut scratch.stats.work };
             nodes::eval_into(&node.op, node.ty, &ins[..n_in], &mut ctx, &mut scratch.values[i]);
-            scratch.timing_end(i, start);
-            scratch.stats.evaluations[i] += scratch.instrumented as u64;
+            scratch.counted(i, start);
         }
     }
 

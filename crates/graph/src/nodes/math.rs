@@ -757,17 +757,24 @@ pub(crate) fn is_channelwise(op: &MathOp) -> bool {
     )
 }
 
-/// [`eval_into`] for a [`is_channelwise`] `op` with its inputs by reference (at most 8), the
-/// same arithmetic in the same order: the evaluator hands it the upstream values where they lie
-/// instead of copying each into an input slot first.
+/// [`eval_into`] of an [`is_channelwise`] `op` (at most 8 inputs): each channel from the
+/// inputs' same channel (a one-channel input's only one). The inputs are values or references
+/// to them: the evaluator hands it the upstream values where they lie instead of copying each
+/// into an input slot first.
 #[inline]
-pub(crate) fn eval_channels(op: MathOp, ty: ValueType, ins: &[&Filtered], fp: &Footprint, out: &mut Filtered) {
+pub(crate) fn eval_channels<F: std::borrow::Borrow<Filtered>>(
+    op: MathOp,
+    ty: ValueType,
+    ins: &[F],
+    fp: &Footprint,
+    out: &mut Filtered,
+) {
     debug_assert!(is_channelwise(&op) && ins.len() <= 8);
     *out = Filtered::zero(ty);
     let mut xs = [Moments::default(); 8];
     for k in 0..ty.channels() {
         for (x, i) in xs.iter_mut().zip(ins.iter()) {
-            *x = i.at(k);
+            *x = i.borrow().at(k);
         }
         channel_into(op, &xs[..ins.len()], fp, &mut out.ch[k]);
     }
@@ -785,6 +792,9 @@ pub(crate) fn eval(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx) 
 #[inline]
 pub(crate) fn eval_into(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx, out: &mut Filtered) {
     let fp = ctx.fp;
+    if is_channelwise(op) {
+        return eval_channels(*op, ty, ins, fp, out);
+    }
     let n = ty.channels();
     *out = Filtered::zero(ty);
     match op {
@@ -818,14 +828,6 @@ pub(crate) fn eval_into(op: &MathOp, ty: ValueType, ins: &[Filtered], ctx: &mut 
                 }
             }
         }
-        _ => {
-            let mut xs = [Moments::default(); 8];
-            for k in 0..n {
-                for (x, i) in xs.iter_mut().zip(ins.iter()) {
-                    *x = i.at(k);
-                }
-                channel_into(*op, &xs[..ins.len()], fp, &mut out.ch[k]);
-            }
-        }
+        _ => unreachable!("channel-wise operations are evaluated by eval_channels"),
     }
 }

@@ -315,9 +315,15 @@ pub(crate) fn eval_into(op: &Op, ty: ValueType, ins: &[Filtered], ctx: &mut Ctx,
         Op::Default(_) => *out = ins[0],
     }
     if ctx.point {
-        for c in out.ch.iter_mut() {
-            c.grad = glam::Vec2::ZERO;
-        }
+        point_gradients(out);
+    }
+}
+
+/// Clears `out`'s gradients: at a point footprint a node reports none.
+#[inline]
+pub(crate) fn point_gradients(out: &mut Filtered) {
+    for c in out.ch.iter_mut() {
+        c.grad = glam::Vec2::ZERO;
     }
 }
 

@@ -100,8 +100,19 @@ where
             d[2] = dist;
         }
     });
+    worley_values(p, d, minpos, style, n)
+}
+
+/// What the search at `p` gives from its three nearest squared distances `d` and the offset
+/// `nearest` to the nearest feature: the distances (style 0), or the cell noise of the nearest
+/// feature's cell (style 1; `n` channels).
+#[inline(always)]
+fn worley_values<const D: usize>(p: [f32; D], d: [f32; 3], nearest: [f32; D], style: i32, n: usize) -> [f32; 3]
+where
+    Dim<D>: Lattice<D>,
+{
     if style == 1 {
-        let mut q = minpos;
+        let mut q = nearest;
         for (q, p) in q.iter_mut().zip(p) {
             *q += p;
         }
@@ -146,8 +157,9 @@ fn each_feature<const D: usize>(
     });
 }
 
-/// The four nearest squared distances of [`worley`]'s search at `p` (the same cells, order and
-/// f32 arithmetic) and the offsets from `p` to the three nearest feature points.
+/// The four nearest squared distances of [`worley`]'s search at `p` (the same cells, order,
+/// ties and f32 arithmetic, so its first three are the search's) and the offsets from `p` to
+/// the three nearest feature points.
 #[inline(always)]
 fn worley_ranked<const D: usize>(p: [f32; D], jitter: f32) -> ([f32; 4], [[f32; D]; 3])
 where
@@ -220,7 +232,8 @@ where
     if !(d[0] > reach) || (0..ranked).any(|k| !(d[k + 1] - d[k] > 2.0 * reach)) {
         return None;
     }
-    let v = worley(pf, jitter, style, n);
+    // The point value from the same search (its three nearest, in its order).
+    let v = worley_values(pf, [d2[0], d2[1], d2[2]], at[0], style, n);
     let mut out = [NoiseMoments::<D>::default(); 3];
     for (k, o) in out.iter_mut().enumerate().take(n) {
         o.mean = f64::from(v[k]);
