@@ -26,7 +26,7 @@ fn bvh(c: &mut Criterion) {
             .collect();
         group.throughput(Throughput::Elements(rays.len() as u64));
         for (label, backend) in &backends {
-            let accel: Box<dyn Intersector> = build_intersector(&scene.shapes, *backend).expect("backend builds");
+            let accel = build_intersector(&scene.shapes, *backend).expect("backend builds");
             group.bench_function(format!("{name}/{label}/closest"), |b| {
                 b.iter(|| rays.iter().filter(|r| accel.intersect(&scene.shapes, r).is_some()).count())
             });

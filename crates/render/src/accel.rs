@@ -1,7 +1,8 @@
 //! Which ray-query backend a scene's [`Intersector`] is: the built-in BVH ([`Accel`]) or
 //! Embree ([`crate::embree`]), chosen by `--accel` (auto by default).
 
-use crate::geometry::{Accel, Intersector, Shape};
+use crate::embree::EmbreeAccel;
+use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape};
 
 /// Which ray-query backend scenes are built with ([`build_intersector`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,24 +62,67 @@ pub fn backend() -> Backend {
     }
 }
 
+/// A scene's ray queries: one of the backends, called directly (not through a trait object),
+/// so the backend's query wrapper inlines into the path loop and its hit is handed over in
+/// registers rather than through memory (measured: a trait-object call's returned hit was
+/// reloaded across the stores that wrote it, a store-forwarding stall at every bounce).
+pub enum SceneAccel {
+    /// The built-in BVH.
+    Bvh(Accel),
+    /// Embree.
+    Embree(EmbreeAccel),
+}
+
+impl Intersector for SceneAccel {
+    #[inline]
+    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        match self {
+            SceneAccel::Bvh(a) => a.intersect(shapes, ray),
+            SceneAccel::Embree(a) => a.intersect(shapes, ray),
+        }
+    }
+
+    #[inline]
+    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
+        match self {
+            SceneAccel::Bvh(a) => a.occluded(shapes, ray),
+            SceneAccel::Embree(a) => a.occluded(shapes, ray),
+        }
+    }
+
+    fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
+        match self {
+            SceneAccel::Bvh(a) => a.intersect_shape(shapes, ray, shape),
+            SceneAccel::Embree(a) => a.intersect_shape(shapes, ray, shape),
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            SceneAccel::Bvh(a) => a.describe(),
+            SceneAccel::Embree(a) => a.describe(),
+        }
+    }
+}
+
 /// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
 /// loads (it is the faster on every scene measured: triangles alone, spheres alone, both), else
 /// the built-in BVH (also when Embree fails, with a warning on stderr); an error when
 /// [`Backend::Embree`] is asked for and cannot be had, or when the built-in BVH cannot hold the
 /// scene.
-pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<Box<dyn Intersector>, String> {
+pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<SceneAccel, String> {
     match backend {
-        Backend::Bvh => Ok(Box::new(Accel::build(shapes)?)),
-        Backend::Embree => crate::embree::EmbreeAccel::build(shapes)
-            .map(|a| Box::new(a) as Box<dyn Intersector>)
+        Backend::Bvh => Ok(SceneAccel::Bvh(Accel::build(shapes)?)),
+        Backend::Embree => EmbreeAccel::build(shapes)
+            .map(SceneAccel::Embree)
             .map_err(|e| format!("--accel embree: {e} (scripts/install-embree.sh installs it)")),
-        Backend::Auto if crate::embree::available().is_ok() => match crate::embree::EmbreeAccel::build(shapes) {
-            Ok(a) => Ok(Box::new(a)),
+        Backend::Auto if crate::embree::available().is_ok() => match EmbreeAccel::build(shapes) {
+            Ok(a) => Ok(SceneAccel::Embree(a)),
             Err(e) => {
                 eprintln!("warning: {e}; tracing rays with the built-in BVH instead");
-                Ok(Box::new(Accel::build(shapes)?))
+                Ok(SceneAccel::Bvh(Accel::build(shapes)?))
             }
         },
-        Backend::Auto => Ok(Box::new(Accel::build(shapes)?)),
+        Backend::Auto => Ok(SceneAccel::Bvh(Accel::build(shapes)?)),
     }
 }

@@ -598,6 +598,7 @@ fn rtc_ray(ray: &Ray) -> RtcRay {
 }
 
 impl Intersector for EmbreeAccel {
+    #[inline]
     fn intersect(&self, _shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
         self.closest(ray, None)
     }
@@ -610,6 +611,7 @@ impl Intersector for EmbreeAccel {
         }
     }
 
+    #[inline]
     fn occluded(&self, _shapes: &[Shape], ray: &Ray) -> bool {
         if !valid(ray) {
             return false;

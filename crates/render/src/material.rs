@@ -65,6 +65,13 @@ pub struct Material {
 }
 
 impl Material {
+    /// Whether shading a hit reads its uv and their derivatives: graph outputs, a shading
+    /// normal from a graph, or a BSDF texture that varies over the surface.
+    #[inline]
+    pub fn reads_uv(&self) -> bool {
+        !self.graphs.is_empty() || self.normal_slot.is_some() || self.bsdf.reads_uv()
+    }
+
     /// Fills [`Material::constant_outputs`]: every output evaluated with a footprint far larger
     /// than any feature (σ = 100 uv units), i.e. its mean over the plane.
     pub fn compute_constant_outputs(&mut self, graphs: &[SceneGraph]) {

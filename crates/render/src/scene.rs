@@ -3,7 +3,7 @@
 
 use crate::camera::{Camera, Rfilter};
 use crate::emitter::Emitter;
-use crate::geometry::{Intersector, Shape};
+use crate::geometry::Shape;
 use crate::material::{Material, SceneGraph};
 use std::path::PathBuf;
 
@@ -21,7 +21,7 @@ pub struct Scene {
     /// Shapes (world space).
     pub shapes: Vec<Shape>,
     /// BVH over the shapes.
-    pub accel: Box<dyn Intersector>,
+    pub accel: crate::accel::SceneAccel,
     /// Materials; shapes refer to them by index.
     pub materials: Vec<Material>,
     /// Procedural graphs the materials read (one per MaterialX document).

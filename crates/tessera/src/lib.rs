@@ -16,6 +16,7 @@ use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use render::caching::{render_cached, NodeCache, Strategy};
+use render::geometry::Intersector;
 use render::integrator::{Bucket, RenderOutput, RenderSettings, AOV_NO_VERTEX};
 use render::pathfootprint::FootprintMode;
 use render::scene::Scene;

@@ -402,6 +402,51 @@ impl BsdfDesc {
         }
     }
 
+    /// True if any of its textures varies over the surface, i.e. reads the hit's uv (a graph
+    /// output counts as varying). Without one, and without footprints, a hit's uv and its
+    /// derivatives are never read ([`crate::geometry::interaction_with`]).
+    pub fn reads_uv(&self) -> bool {
+        let varies = |t: &Texture| !matches!(t, Texture::Constant(_));
+        match self {
+            BsdfDesc::TwoSided(inner) => inner.reads_uv(),
+            BsdfDesc::Mask { opacity, bsdf, .. } => varies(opacity) || bsdf.reads_uv(),
+            BsdfDesc::Diffuse { reflectance } => varies(reflectance),
+            BsdfDesc::Conductor { specular_reflectance, .. } => varies(specular_reflectance),
+            BsdfDesc::RoughConductor { specular_reflectance, alpha_u, alpha_v, .. } => {
+                [specular_reflectance, alpha_u, alpha_v].into_iter().any(varies)
+            }
+            BsdfDesc::Dielectric { specular_reflectance, specular_transmittance, .. } => {
+                varies(specular_reflectance) || varies(specular_transmittance)
+            }
+            BsdfDesc::RoughDielectric { specular_reflectance, specular_transmittance, alpha_u, alpha_v, .. } => {
+                [specular_reflectance, specular_transmittance, alpha_u, alpha_v].into_iter().any(varies)
+            }
+            BsdfDesc::StandardSurface {
+                base,
+                base_color,
+                metalness,
+                specular,
+                specular_color,
+                specular_roughness,
+                specular_ior,
+                transmission,
+                transmission_color,
+            } => [
+                base,
+                base_color,
+                metalness,
+                specular,
+                specular_color,
+                specular_roughness,
+                specular_ior,
+                transmission,
+                transmission_color,
+            ]
+            .into_iter()
+            .any(varies),
+        }
+    }
+
     /// True if the surface is (possibly) partly transparent: a [`BsdfDesc::Mask`], at any depth.
     pub fn is_masked(&self) -> bool {
         match self {

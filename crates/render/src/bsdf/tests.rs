@@ -1389,3 +1389,55 @@ fn bsdf_standard_surface_never_returns_nan() {
         }
     }
 }
+
+/// `reads_uv` is false only where the BSDF (and its opacity) is the same at every uv: the path
+/// loop then skips a hit's parametrisation.
+#[test]
+fn reads_uv_only_where_the_bsdf_varies() {
+    use glam::Affine2;
+    let checker = || Texture::Checkerboard {
+        color0: Spectrum::new(0.9, 0.2, 0.1),
+        color1: Spectrum::new(0.1, 0.3, 0.8),
+        to_uv: Affine2::from_scale(Vec2::splat(3.0)),
+    };
+    let constant = |v: f32| Texture::Constant(Spectrum::splat(v));
+    let rough = |alpha_v: Texture| BsdfDesc::RoughConductor {
+        eta: Spectrum::splat(0.2),
+        k: Spectrum::splat(3.0),
+        specular_reflectance: constant(1.0),
+        distribution: MicrofacetKind::Ggx,
+        alpha_u: constant(0.2),
+        alpha_v,
+    };
+    let cases = [
+        (BsdfDesc::Diffuse { reflectance: constant(0.5) }, false),
+        (BsdfDesc::Diffuse { reflectance: checker() }, true),
+        (BsdfDesc::TwoSided(Box::new(BsdfDesc::Diffuse { reflectance: checker() })), true),
+        (BsdfDesc::TwoSided(Box::new(rough(constant(0.4)))), false),
+        (rough(checker()), true),
+        (
+            BsdfDesc::Mask {
+                opacity: checker(),
+                scalar: true,
+                bsdf: Box::new(BsdfDesc::Diffuse { reflectance: constant(0.5) }),
+            },
+            true,
+        ),
+        (
+            BsdfDesc::Mask {
+                opacity: constant(0.7),
+                scalar: true,
+                bsdf: Box::new(BsdfDesc::Diffuse { reflectance: constant(0.5) }),
+            },
+            false,
+        ),
+    ];
+    let uvs = [Vec2::new(0.05, 0.05), Vec2::new(0.2, 0.05), Vec2::new(0.05, 0.2), Vec2::new(0.7, 0.9)];
+    for (k, (desc, reads)) in cases.iter().enumerate() {
+        assert_eq!(desc.reads_uv(), *reads, "case {k}");
+        let at = |uv| (desc.at(&ShadeContext::uv(uv)), desc.opacity(&ShadeContext::uv(uv)));
+        let same = uvs.iter().all(|&uv| at(uv) == at(uvs[0]));
+        // Every varying case here does vary over these points; none that reads no uv may.
+        assert_eq!(same, !reads, "case {k}");
+    }
+}

@@ -10,7 +10,7 @@ use super::{Event, PathObserver, RenderCounts, RenderSettings};
 use crate::bsdf::{Bsdf, BsdfSample, LobeKind};
 use crate::camera::CameraRay;
 use crate::emitter::Emitter;
-use crate::geometry::{interaction, Ray, SurfaceInteraction};
+use crate::geometry::{interaction, interaction_with, Intersector, Ray, SurfaceInteraction};
 use crate::material::Material;
 use crate::math::{max_component, Frame, Spectrum};
 use crate::pathfootprint::{shadow_scatter, FootprintMode, PathFootprint};
@@ -551,9 +551,11 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
             obs.escape(depth, ray.d);
             break;
         };
-        let si = interaction(&scene.shapes, &ray, &hit);
-        let shape = &scene.shapes[si.shape as usize];
+        let shape = &scene.shapes[hit.shape as usize];
         let material = &scene.materials[shape.material as usize];
+        // The surface's parametrisation only where a texture, a footprint or the observer reads it.
+        let full = footprints.track || O::WANTS_FOOTPRINTS || material.reads_uv();
+        let si = interaction_with(&scene.shapes, &ray, &hit, full);
         // The footprint here; the path keeps it only if it scatters here.
         let here = footprints.arrive(scene, &settings, cam, &si, ray.d);
         if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {

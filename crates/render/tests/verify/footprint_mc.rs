@@ -36,7 +36,7 @@ use footprint::{
 use glam::{DMat2, DVec2, DVec3, Vec2};
 use render::bsdf::BsdfSample;
 use render::camera::CameraRay;
-use render::geometry::{interaction, SurfaceInteraction};
+use render::geometry::{interaction, Intersector, SurfaceInteraction};
 use render::integrator::spawn_ray;
 use render::pathfootprint::{scatter_of, FootprintMode, PathFootprint};
 use render::sampling::Rng;
