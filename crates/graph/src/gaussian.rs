@@ -11,8 +11,16 @@ use std::f64::consts::{FRAC_1_SQRT_2, PI};
 /// Standard normal density φ(z).
 #[inline]
 pub fn pdf(z: f64) -> f64 {
+    // Beyond |z| = 38.61, `exp(−z²/2)` rounds to 0 exactly: returned here
+    // without libm's underflow path (which costs as much as a whole filtered node).
+    if z.abs() > PDF_ZERO {
+        return 0.0;
+    }
     (-0.5 * z * z).exp() * (0.5 / PI).sqrt()
 }
+
+/// |z| beyond which [`pdf`] underflows to 0 (`exp(x)` rounds to 0 below x = −745.14).
+const PDF_ZERO: f64 = 38.61;
 
 /// Standard normal cumulative distribution Φ(z), accurate in both tails.
 #[inline]
@@ -243,28 +251,64 @@ pub fn poly_deriv(p: &Poly) -> Poly {
 }
 
 /// Mean and variance of `f(X)` for a piecewise-polynomial `f` (pieces of degree ≤ 3 for the
-/// variance to be exact; higher degrees give the mean only and `var = NaN`), plus
-/// `d E[f(X)] / dm`.
+/// variance to be exact; the square of a higher degree loses its terms beyond
+/// [`MAX_DEGREE`]), plus `d E[f(X)] / dm`.
+///
+/// Each piece's polynomial is shifted and scaled to the standard normal once: its square and its
+/// derivative follow from that (`q(z) = p(m + sz)` gives `p² → q²` and `p′ → q′/s`). Each
+/// boundary's special functions ([`TailMoments::at`], one `exp` and one `erfc`) are computed once
+/// and shared by the two pieces that meet there, and a constant piece needs only its mass.
 pub fn piecewise_moments(pieces: &[Piece], m: f64, s: f64) -> (f64, f64, f64) {
     let mut mean = 0.0;
     let mut second = 0.0;
     let mut dmean = 0.0;
-    for pc in pieces {
-        if s <= 0.0 {
+    if s <= 0.0 {
+        for pc in pieces {
             if pc.lo <= m && m < pc.hi {
                 mean += poly_eval(&pc.p, m);
                 second += poly_eval(&pc.p, m).powi(2);
                 dmean += poly_eval(&poly_deriv(&pc.p), m);
             }
+        }
+        return (mean, (second - mean * mean).max(0.0), dmean);
+    }
+    // The boundary last evaluated: a piece's upper end is usually the next one's lower end.
+    let mut last: Option<(f64, TailMoments)> = None;
+    let mut tail_at = |z: f64| match last {
+        Some((lz, t)) if lz == z => t,
+        _ => {
+            let t = TailMoments::at(z);
+            last = Some((z, t));
+            t
+        }
+    };
+    for pc in pieces {
+        let (a, b) = ((pc.lo - m) / s, (pc.hi - m) / s);
+        if a >= PIECE_REACH || b <= -PIECE_REACH || a >= b {
             continue;
         }
-        // One set of partial moments per piece serves its mean, square and slope.
-        let Some(i) = piece_moments(pc.lo, pc.hi, m, s) else { continue };
-        mean += dot(&poly_shift_scale(&pc.p, m, s), &i);
-        second += dot(&poly_shift_scale(&poly_mul(&pc.p, &pc.p), m, s), &i);
-        dmean += dot(&poly_shift_scale(&poly_deriv(&pc.p), m, s), &i);
+        let i = if a <= -PIECE_REACH && b >= PIECE_REACH {
+            FULL_MOMENTS
+        } else {
+            let ta = tail_at(a);
+            TailMoments::between(&ta, &tail_at(b))
+        };
         // Jumps at the piece ends also move the mean: + φ density × jump. Handled by callers
         // whose functions jump (steps) through `step_moments`; continuous pieces need nothing.
+        if pc.p[1..].iter().all(|&c| c == 0.0) {
+            let c = pc.p[0];
+            mean += c * i[0];
+            second += c * c * i[0];
+            continue;
+        }
+        let q = poly_shift_scale(&pc.p, m, s);
+        mean += dot(&q, &i);
+        second += dot(&poly_mul(&q, &q), &i);
+        let mut dq = 0.0;
+        for k in 1..=MAX_DEGREE {
+            dq += k as f64 * q[k] * i[k - 1];
+        }
+        dmean += dq / s;
     }
     (mean, (second - mean * mean).max(0.0), dmean)
 }
@@ -610,6 +654,91 @@ mod tests {
         // Full line: E[X²] = m² + s².
         let e = poly_expectation(&poly(&[0.0, 0.0, 1.0]), f64::NEG_INFINITY, f64::INFINITY, 3.0, 0.5);
         assert!((e - 9.25).abs() < 1e-12);
+    }
+
+    /// Mean, variance and `dE/dm` of piecewise polynomials against the midpoint rule (the slope
+    /// against a central difference of brute-force means): contiguous pieces that share their
+    /// boundaries, gaps, constants, lines and cubics, footprints inside, across and far beyond
+    /// the pieces (where a boundary's tail moments are zero and `pdf` would underflow).
+    #[test]
+    fn piecewise_moments_match_quadrature() {
+        let mut rng = crate::testing::uniform(0x9e37);
+        let mut worst = [0.0f64; 3];
+        for case in 0..400 {
+            let n = 1 + (rng() * 4.0) as usize;
+            let mut pieces = Vec::new();
+            let mut x = -2.0 + 2.0 * rng();
+            for k in 0..n {
+                let w = 0.05 + 1.5 * rng();
+                // Every third piece leaves a gap before the next.
+                let lo = if k > 0 && case % 3 == 0 { x + 0.3 * rng() } else { x };
+                let deg = (rng() * 4.0) as usize;
+                let c: Vec<f64> = (0..=deg).map(|_| 2.0 * rng() - 1.0).collect();
+                let lo = if k == 0 && case % 5 == 0 { f64::NEG_INFINITY } else { lo };
+                let hi = if k + 1 == n && case % 7 == 0 { f64::INFINITY } else { x.max(lo) + w };
+                pieces.push(Piece { lo, hi, p: poly(&c) });
+                x = hi;
+            }
+            let m = -3.0 + 6.0 * rng();
+            let s = [1e-3, 0.05, 0.3, 1.0, 4.0][case % 5] * (0.5 + rng());
+            let (mean, var, dmean) = piecewise_moments(&pieces, m, s);
+            // E[g(f(X))] by the midpoint rule on each piece's part of m ± 12s (f is smooth
+            // there), 20000 nodes each (its own error is below 5e-8 here).
+            let brute_at = |m: f64, g: &dyn Fn(&Poly, f64) -> f64| -> f64 {
+                pieces
+                    .iter()
+                    .map(|pc| {
+                        let (lo, hi) = (pc.lo.max(m - 12.0 * s), pc.hi.min(m + 12.0 * s));
+                        if lo >= hi {
+                            return 0.0;
+                        }
+                        let h = (hi - lo) / 20000.0;
+                        (0..20000)
+                            .map(|i| {
+                                let x = lo + (i as f64 + 0.5) * h;
+                                g(&pc.p, x) * pdf((x - m) / s) / s * h
+                            })
+                            .sum::<f64>()
+                    })
+                    .sum()
+            };
+            let bm = brute_at(m, &|p, x| poly_eval(p, x));
+            let bv = brute_at(m, &|p, x| poly_eval(p, x).powi(2)) - bm * bm;
+            // The slope the function promises: E[f′(X)] (jumps are the callers' to add).
+            let bd = brute_at(m, &|p, x| poly_eval(&poly_deriv(p), x));
+            // Relative to the size of what each is computed from.
+            let err = [
+                (mean - bm).abs() / (1.0 + bm.abs()),
+                (var - bv).abs() / (1.0 + bv + bm * bm),
+                (dmean - bd).abs() / (1.0 + bd.abs()),
+            ];
+            for (w, e) in worst.iter_mut().zip(err) {
+                *w = w.max(e);
+            }
+            assert!(
+                err.iter().all(|&e| e < 2e-7),
+                "case {case}: mean {mean} vs {bm}, var {var} vs {bv}, slope {dmean} vs {bd} ({pieces:?}, m {m}, s {s})"
+            );
+        }
+        // A continuous function's slope is the mean's derivative: smoothstep against a central
+        // difference of brute-force means.
+        let ss = [
+            Piece { lo: 0.2, hi: 0.7, p: poly_shift_scale(&poly(&[0.0, 0.0, 3.0, -2.0]), -0.4, 2.0) },
+            Piece { lo: 0.7, hi: f64::INFINITY, p: poly(&[1.0]) },
+        ];
+        let f = |x: f64| ss.iter().filter(|pc| pc.lo <= x && x < pc.hi).map(|pc| poly_eval(&pc.p, x)).sum::<f64>();
+        for &(m, s) in &[(0.3, 0.05), (0.69, 0.2), (-0.5, 0.4), (1.5, 0.6)] {
+            let (_, _, d) = piecewise_moments(&ss, m, s);
+            let h = 1e-3 * s;
+            let fd = (brute(f, m + h, s) - brute(f, m - h, s)) / (2.0 * h);
+            assert!((d - fd).abs() < 1e-3 * (1.0 + fd.abs()), "smoothstep slope at m {m} s {s}: {d} vs {fd}");
+        }
+        eprintln!("worst relative errors: mean {:.1e}, variance {:.1e}, slope {:.1e}", worst[0], worst[1], worst[2]);
+        // A footprint far from every piece sees nothing, and finds it without underflow.
+        let pc = [Piece { lo: 0.0, hi: 1.0, p: poly(&[1.0]) }];
+        assert_eq!(piecewise_moments(&pc, 1e6, 1.0), (0.0, 0.0, 0.0));
+        assert_eq!(pdf(38.62), 0.0);
+        assert!(pdf(38.5) > 0.0);
     }
 
     #[test]
