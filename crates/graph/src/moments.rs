@@ -313,7 +313,7 @@ pub fn frac_moments(m: f64, s: f64) -> FracMoments {
         for n in 1..=4 {
             let nf = n as f64;
             let w = 2.0 * PI * nf;
-            let att = (-0.5 * w * w * s * s).exp();
+            let att = gaussian::exp_damping(-0.5 * w * w * s * s);
             if att < 1e-12 {
                 break;
             }
@@ -360,7 +360,7 @@ pub fn tri_moments(m: f64, s: f64) -> (f64, f64, f64) {
     for k in 1..=4 {
         let kf = k as f64;
         let w = 2.0 * PI * kf;
-        let att = (-0.5 * w * w * s * s).exp();
+        let att = gaussian::exp_damping(-0.5 * w * w * s * s);
         if att < 1e-12 {
             break;
         }

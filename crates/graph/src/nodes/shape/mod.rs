@@ -325,7 +325,7 @@ fn periodic_mass(a: f64, b: f64, m: f64, s: f64) -> (f64, f64) {
         let (mut p, mut d) = (w, 0.0);
         for n in 1..=8 {
             let nf = n as f64;
-            let att = (-2.0 * PI * PI * nf * nf * s * s).exp();
+            let att = crate::gaussian::exp_damping(-2.0 * PI * PI * nf * nf * s * s);
             if att < 1e-14 {
                 break;
             }

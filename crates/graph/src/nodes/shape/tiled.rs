@@ -156,7 +156,7 @@ impl Series {
         let ky_max = if bounded { clamp((CUT / det).sqrt().floor() + 1.0) } else { k };
         let (mut p, mut gx, mut gy) = (0.0, 0.0, 0.0);
         for ky in -ky_max..=ky_max {
-            let dy = (-b * (ky * ky) as f64).exp();
+            let dy = crate::gaussian::exp_damping(-b * (ky * ky) as f64);
             if dy < 1e-12 {
                 continue;
             }
@@ -174,7 +174,7 @@ impl Series {
             for kx in kx0..=kx1 {
                 // One exponent: the quadratic form is ≥ 0, its cross term alone is not.
                 let (fx, fy) = (kx as f64, ky as f64);
-                let d = (-(a * fx * fx + b * fy * fy + c * fx * fy)).exp();
+                let d = crate::gaussian::exp_damping(-(a * fx * fx + b * fy * fy + c * fx * fy));
                 if d < 1e-12 {
                     continue;
                 }
