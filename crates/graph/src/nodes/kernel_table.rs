@@ -121,6 +121,19 @@ impl Rows {
         let b = hermite_basis((y - j as f64) as f32);
         Rows { j, b, k0: (hs * j as f64 * hs) as f32, k1: (hs * (j + 1) as f64 * hs) as f32 }
     }
+
+    /// The one row the interpolation in `s` reads where the spread lies on a row (its basis is
+    /// `[1, 0, 0, 0]` or `[0, 0, 1, 0]`): damped octaves, whose spreads are clamped to the last
+    /// row, and 3D octaves at σₑ. The other row's terms are multiplied by zeros there, so reading
+    /// this row alone gives the same numbers.
+    #[inline]
+    fn single(&self) -> Option<usize> {
+        match self.b {
+            [1.0, 0.0, 0.0, 0.0] => Some(self.j),
+            [0.0, 0.0, 1.0, 0.0] => Some(self.j + 1),
+            _ => None,
+        }
+    }
 }
 
 /// The axis terms at offset `d` and spread `s ∈ [0, S_MAX]`, interpolated.
@@ -129,34 +142,53 @@ fn lookup(d: f64, s: f64) -> AxisTerms {
     lookup_in(table(), &Rows::at(s), d)
 }
 
+/// Row `r` at `|d| < D_MAX`: eight quantities by Hermite in `d` (written lane by lane so that
+/// it compiles to vector arithmetic).
+#[inline(always)]
+fn row_at(tab: &[Node], r: usize, ad: f64) -> [f32; 8] {
+    let x = ad * D_RES;
+    let i = (x as usize).min(ND - 2);
+    let bd = hermite_basis((x - i as f64) as f32);
+    let (a, b) = (&tab[r * ND + i], &tab[r * ND + i + 1]);
+    let mut o = [0.0f32; 8];
+    for k in 0..8 {
+        o[k] = bd[0] * a.v[k] + bd[1] * a.g[k] + bd[2] * b.v[k] + bd[3] * b.g[k];
+    }
+    o
+}
+
+/// The axis terms from the row's `w, w′, dw, (dw)′` and the sign of `d` (parity: `w` and
+/// `(dw)′` even in `d`, `w′` and `dw` odd).
+#[inline(always)]
+fn with_parity(d: f64, w: f64, w1: f64, dw: f64, dw1: f64) -> AxisTerms {
+    let sign = if d < 0.0 { -1.0 } else { 1.0 };
+    AxisTerms { w, dw: sign * dw, w1: sign * w1, dw1 }
+}
+
+/// [`lookup_in`] where the spread lies on row `r` ([`Rows::single`]).
+#[inline]
+fn lookup_row(tab: &[Node], r: usize, d: f64) -> AxisTerms {
+    let ad = d.abs();
+    if ad >= D_MAX {
+        return AxisTerms::default();
+    }
+    let o = row_at(tab, r, ad);
+    with_parity(d, o[0] as f64, o[1] as f64, o[4] as f64, o[5] as f64)
+}
+
 #[inline]
 fn lookup_in(tab: &[Node], rows: &Rows, d: f64) -> AxisTerms {
     let ad = d.abs();
     if ad >= D_MAX {
         return AxisTerms::default();
     }
-    let x = ad * D_RES;
-    let i = (x as usize).min(ND - 2);
-    let bd = hermite_basis((x - i as f64) as f32);
-    // Both rows at d, eight quantities each, by Hermite in d (written lane by lane so that it
-    // compiles to vector arithmetic).
-    let row = |r: usize| -> [f32; 8] {
-        let (a, b) = (&tab[r * ND + i], &tab[r * ND + i + 1]);
-        let mut o = [0.0f32; 8];
-        for k in 0..8 {
-            o[k] = bd[0] * a.v[k] + bd[1] * a.g[k] + bd[2] * b.v[k] + bd[3] * b.g[k];
-        }
-        o
-    };
-    let (r0, r1) = (row(rows.j), row(rows.j + 1));
+    // Both rows at d.
+    let (r0, r1) = (row_at(tab, rows.j, ad), row_at(tab, rows.j + 1, ad));
     // In s, by Hermite with the slope ∂f/∂s = s ∂²f/∂d²: w from its second derivative, w' from
     // its third, likewise for dw.
     let b = &rows.b;
     let sl = |k: usize| (b[0] * r0[k] + b[1] * rows.k0 * r0[k + 2] + b[2] * r1[k] + b[3] * rows.k1 * r1[k + 2]) as f64;
-    let (w, w1, dw, dw1) = (sl(0), sl(1), sl(4), sl(5));
-    // Parity: w and dw' even in d, w' and dw odd.
-    let sign = if d < 0.0 { -1.0 } else { 1.0 };
-    AxisTerms { w, dw: sign * dw, w1: sign * w1, dw1 }
+    with_parity(d, sl(0), sl(1), sl(4), sl(5))
 }
 
 /// [`super::noise::axis_terms_exact`] from the table: the terms of every lattice coordinate in
@@ -165,12 +197,23 @@ fn lookup_in(tab: &[Node], rows: &Rows, d: f64) -> AxisTerms {
 pub(crate) fn axis_terms<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); N]) -> usize {
     let (tab, rows) = (table(), Rows::at(s));
     let mut n = 0;
-    for c in lo..=hi {
-        if n >= N {
-            break;
+    // One loop per case, so that neither tests the case per coordinate.
+    if let Some(r) = rows.single() {
+        for c in lo..=hi {
+            if n >= N {
+                break;
+            }
+            out[n] = (c, lookup_row(tab, r, m - c as f64));
+            n += 1;
         }
-        out[n] = (c, lookup_in(tab, &rows, m - c as f64));
-        n += 1;
+    } else {
+        for c in lo..=hi {
+            if n >= N {
+                break;
+            }
+            out[n] = (c, lookup_in(tab, &rows, m - c as f64));
+            n += 1;
+        }
     }
     n
 }

@@ -486,7 +486,8 @@ where
         return true;
     }
     let (kappa, sigma_e) = (Dim::<D>::kappa(sels[0]), Dim::<D>::SIGMA_EXACT);
-    let damp = |s: f64| if s > sigma_e { crate::gaussian::exp_damping(-kappa * (s * s - sigma_e * sigma_e)) } else { 1.0 };
+    let damp =
+        |s: f64| if s > sigma_e { crate::gaussian::exp_damping(-kappa * (s * s - sigma_e * sigma_e)) } else { 1.0 };
     let att = s[1..].iter().fold(damp(s[0]), |acc, &x| acc * damp(x));
     if att < OCTAVE_CUTOFF {
         let cut = NoiseMoments { var: Dim::<D>::variance(sels[0]), ..NoiseMoments::default() };
