@@ -23,7 +23,9 @@
 
 #[cfg(test)]
 use super::noise::axis_terms_exact;
-use super::noise::{kernel_expectations, AxisTerms};
+#[cfg(test)]
+use super::noise::kernel_expectations;
+use super::noise::AxisTerms;
 use std::sync::OnceLock;
 
 /// Nodes per lattice unit along `d`.
@@ -47,14 +49,33 @@ struct Node {
     g: [f32; 8],
 }
 
+/// The table's nodes as [`build`] computes them, row by row, each node's `v` then `g` as
+/// little-endian `f32`: building them took about 7 ms of every process that filters Perlin
+/// noise (a twentieth of a small demo render's texture time, on one core while the other
+/// waited); reading them takes well under one. The test `embedded_table_is_what_build_gives`
+/// recomputes them; `regenerate_kernel_table` rewrites the file.
+const EMBEDDED: &[u8] = include_bytes!("kernel_table.bin");
+
 fn table() -> &'static [Node] {
     static T: OnceLock<Box<[Node]>> = OnceLock::new();
-    T.get_or_init(build)
+    T.get_or_init(|| {
+        let f: Vec<f32> = EMBEDDED.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+        assert_eq!(f.len(), ND * NS * 16, "kernel_table.bin does not match the table's size");
+        f.chunks_exact(16)
+            .map(|n| {
+                let (mut v, mut g) = ([0.0; 8], [0.0; 8]);
+                v.copy_from_slice(&n[..8]);
+                g.copy_from_slice(&n[8..]);
+                Node { v, g }
+            })
+            .collect()
+    })
 }
 
 /// Builds the table from the exact integrals ([`kernel_expectations`]: the kernel's derivatives
 /// averaged, from one set of cell moments per node); the first row (`s = 0`) from the kernel's
 /// polynomials.
+#[cfg(test)]
 fn build() -> Box<[Node]> {
     let mut t = vec![[0.0f64; 8]; ND * NS];
     for j in 0..NS {
@@ -78,6 +99,7 @@ fn build() -> Box<[Node]> {
     nodes.into_boxed_slice()
 }
 
+#[cfg(test)]
 /// The kernel itself at `d ≥ 0`: `W(d) = 1 − fade(d)` on `[0, 1)`, 0 beyond, and `d·W(d)`, with
 /// their derivatives (one-sided from above at `d = 0`, where the third derivative jumps).
 fn kernel_at(d: f64) -> [f64; 8] {
@@ -221,6 +243,35 @@ pub(crate) fn axis_terms<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The embedded nodes are [`build`]'s, bit for bit where the machine's maths library agrees
+    /// with the one that wrote them, and within 1e-6 (relative to 1 + |value|) anywhere.
+    #[test]
+    fn embedded_table_is_what_build_gives() {
+        let fresh = build();
+        let embedded = table();
+        assert_eq!(fresh.len(), embedded.len());
+        let (mut same, mut worst) = (0, 0.0f32);
+        for (a, b) in fresh.iter().zip(embedded) {
+            for (x, y) in a.v.iter().chain(&a.g).zip(b.v.iter().chain(&b.g)) {
+                same += usize::from(x.to_bits() == y.to_bits());
+                worst = worst.max((x - y).abs() / (1.0 + x.abs()));
+            }
+        }
+        println!("kernel table: {same} of {} values bit-identical, worst difference {worst:e}", fresh.len() * 16);
+        assert!(worst <= 1e-6, "kernel_table.bin is stale (worst difference {worst:e}): run regenerate_kernel_table");
+    }
+
+    /// Rewrites `kernel_table.bin` after a change to the kernel, its integrals or the nodes:
+    /// `cargo test --release -p graph --lib regenerate_kernel_table -- --ignored`.
+    #[test]
+    #[ignore]
+    fn regenerate_kernel_table() {
+        let bytes: Vec<u8> =
+            build().iter().flat_map(|n| n.v.iter().chain(&n.g)).flat_map(|v| v.to_le_bytes()).collect();
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/nodes/kernel_table.bin");
+        std::fs::write(&path, bytes).unwrap();
+    }
 
     /// A splitmix64 stream of uniforms in [0, 1).
     fn uniforms(mut state: u64) -> impl FnMut() -> f64 {

@@ -150,6 +150,7 @@ pub(crate) fn axis_terms_exact<const N: usize>(
 /// piecewise polynomial on the two unit cells around 0, so all eight read the same two sets of
 /// cell moments (the third derivatives jump at 0 and ±1 but the second are continuous, so these
 /// are also the `d`-derivatives of the averages).
+#[cfg(test)]
 pub(crate) fn kernel_expectations(d: f64, s: f64) -> [f64; 8] {
     let z = |c: f64| (c - d) / s;
     let (t0, t1, t2) =

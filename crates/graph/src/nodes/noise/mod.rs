@@ -69,7 +69,9 @@ use worley::{worley2d, worley3_stats, worley3d, worley_stats, WorleyStats};
 
 #[cfg(test)]
 pub(crate) use filter::axis_terms_exact;
-pub(crate) use filter::{kernel_expectations, AxisTerms};
+#[cfg(test)]
+pub(crate) use filter::kernel_expectations;
+pub(crate) use filter::AxisTerms;
 pub use fractal::{fractal3_point, fractal_point};
 pub use lattice::{perlin3, perlin_float};
 pub use worley::{worley3_point, worley_point};
