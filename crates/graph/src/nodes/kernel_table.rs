@@ -18,8 +18,13 @@
 //!   interpolated row already holds;
 //! - the functions' parity (`E[W]` and `∂E[dW]` even in `d`, the other two odd) halves the table.
 //!
-//! The table (1.5 MiB) is built once, on first use (about 9 ms), from the exact integrals; the
-//! tests bound its error against them.
+//! The table (1.5 MiB) is computed from the exact integrals and embedded in the binary
+//! (`kernel_table.bin`; building it took about 7 ms of every process); the tests rebuild it and
+//! bound its error against the integrals. A spread that lies on a row reads that row alone
+//! (damped octaves, clamped to the last). Where a coordinate's footprint lies inside one
+//! polynomial piece of the kernel (small spreads, away from the piece ends), the terms are
+//! computed in closed form instead, more exactly than the table and without its loads
+//! ([`within_piece`]).
 
 #[cfg(test)]
 use super::noise::axis_terms_exact;
