@@ -11,17 +11,13 @@ use std::f64::consts::{FRAC_1_SQRT_2, PI};
 /// Standard normal density φ(z).
 #[inline]
 pub fn pdf(z: f64) -> f64 {
-    // Beyond |z| = 38.61, `exp(−z²/2)` rounds to 0 exactly: returned here
-    // without libm's underflow path (which costs as much as a whole filtered node).
-    if z.abs() > PDF_ZERO {
-        return 0.0;
-    }
-    (-0.5 * z * z).exp() * (0.5 / PI).sqrt()
+    // Far beyond the footprint (a piece's end, a cell's edge) without libm's underflow path.
+    exp_damping(-0.5 * z * z) * (0.5 / PI).sqrt()
 }
 
-/// `eˣ`, with the exact 0 of every `x < −746` returned without libm's underflow path (which
-/// costs as much as a filtered node): for the Gaussian dampings of Fourier series and octaves,
-/// whose exponents grow without bound with the footprint.
+/// `eˣ`, with the exact 0 of every `x < −746` (`eˣ` rounds to 0 below −745.14) returned without
+/// libm's underflow path, which costs as much as a filtered node: for the Gaussian densities and
+/// dampings (Fourier series, octaves) whose exponents grow without bound with the footprint.
 #[inline]
 pub fn exp_damping(x: f64) -> f64 {
     if x < -746.0 {
@@ -30,9 +26,6 @@ pub fn exp_damping(x: f64) -> f64 {
         x.exp()
     }
 }
-
-/// |z| beyond which [`pdf`] underflows to 0 (`exp(x)` rounds to 0 below x = −745.14).
-const PDF_ZERO: f64 = 38.61;
 
 /// Standard normal cumulative distribution Φ(z), accurate in both tails.
 #[inline]
