@@ -223,33 +223,34 @@ fn lookup_in(tab: &[Node], rows: &Rows, d: f64) -> AxisTerms {
 #[inline]
 pub(crate) fn axis_terms<const N: usize>(m: f64, s: f64, lo: i32, hi: i32, out: &mut [(i32, AxisTerms); N]) -> usize {
     let (tab, rows) = (table(), Rows::at(s));
-    let mut n = 0;
-    // One loop per case, so that neither tests the case per coordinate.
+    // One loop per case (each its own copy of `each_coordinate`), so that none tests the case
+    // per coordinate.
     if let Some(r) = rows.single() {
-        for c in lo..=hi {
-            if n >= N {
-                break;
-            }
-            out[n] = (c, lookup_row(tab, r, m - c as f64));
-            n += 1;
-        }
+        each_coordinate(m, lo, hi, out, |d| lookup_row(tab, r, d))
     } else if s < PIECE_SPREAD_LIMIT {
-        for c in lo..=hi {
-            if n >= N {
-                break;
-            }
-            let d = m - c as f64;
-            out[n] = (c, within_piece(d, s).unwrap_or_else(|| lookup_in(tab, &rows, d)));
-            n += 1;
-        }
+        each_coordinate(m, lo, hi, out, |d| within_piece(d, s).unwrap_or_else(|| lookup_in(tab, &rows, d)))
     } else {
-        for c in lo..=hi {
-            if n >= N {
-                break;
-            }
-            out[n] = (c, lookup_in(tab, &rows, m - c as f64));
-            n += 1;
+        each_coordinate(m, lo, hi, out, |d| lookup_in(tab, &rows, d))
+    }
+}
+
+/// `out[k] = (c, terms(m − c))` for the lattice coordinates `c` in `lo..=hi` (at most `N`;
+/// returns how many).
+#[inline(always)]
+fn each_coordinate<const N: usize>(
+    m: f64,
+    lo: i32,
+    hi: i32,
+    out: &mut [(i32, AxisTerms); N],
+    terms: impl Fn(f64) -> AxisTerms,
+) -> usize {
+    let mut n = 0;
+    for c in lo..=hi {
+        if n >= N {
+            break;
         }
+        out[n] = (c, terms(m - c as f64));
+        n += 1;
     }
     n
 }
