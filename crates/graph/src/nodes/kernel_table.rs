@@ -31,7 +31,6 @@ use super::noise::axis_terms_exact;
 #[cfg(test)]
 use super::noise::kernel_expectations;
 use super::noise::AxisTerms;
-use std::sync::OnceLock;
 
 /// Nodes per lattice unit along `d`.
 const D_RES: f64 = 64.0;
@@ -47,7 +46,7 @@ const NS: usize = (S_MAX * S_RES) as usize + 1;
 
 /// One node: `v = [w, w', w'', w''', dw, dw', dw'', dw''']` at `(d, s)` (primes in `d`), and
 /// `g`, the `d`-derivative of each times the node spacing.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
 #[repr(C, align(64))]
 struct Node {
     v: [f32; 8],
@@ -57,15 +56,30 @@ struct Node {
 /// The table's nodes as [`build`] computes them, row by row, each node's `v` then `g` as
 /// little-endian `f32`: building them took about 7 ms of every process that filters Perlin
 /// noise (a twentieth of a small demo render's texture time, on one core while the other
-/// waited); reading them takes well under one. The test `embedded_table_is_what_build_gives`
-/// recomputes them; `regenerate_kernel_table` rewrites the file.
-const EMBEDDED: &[u8] = include_bytes!("kernel_table.bin");
+/// waited). The test `embedded_table_is_what_build_gives` recomputes them;
+/// `regenerate_kernel_table` rewrites the file. The array's length is the table's: a file of
+/// another size does not compile.
+static EMBEDDED: Aligned<[u8; ND * NS * std::mem::size_of::<Node>()]> = Aligned(*include_bytes!("kernel_table.bin"));
 
+/// Bytes aligned as a [`Node`] is, so that they can be read as nodes in place.
+#[repr(C, align(64))]
+struct Aligned<T>(T);
+
+/// The embedded nodes, read in place: decoding them into a table of their own cost 1.3 ms of
+/// page faults and copying in the first filtered Perlin evaluation of every process (which a
+/// profile then charged to that node's cost), and touched all 1.6 MB where a render reads
+/// a few rows.
+#[cfg(target_endian = "little")]
 fn table() -> &'static [Node] {
-    static T: OnceLock<Box<[Node]>> = OnceLock::new();
+    bytemuck::cast_slice(&EMBEDDED.0)
+}
+
+/// The embedded nodes, decoded from little-endian `f32` once.
+#[cfg(not(target_endian = "little"))]
+fn table() -> &'static [Node] {
+    static T: std::sync::OnceLock<Box<[Node]>> = std::sync::OnceLock::new();
     T.get_or_init(|| {
-        let f: Vec<f32> = EMBEDDED.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
-        assert_eq!(f.len(), ND * NS * 16, "kernel_table.bin does not match the table's size");
+        let f: Vec<f32> = EMBEDDED.0.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
         f.chunks_exact(16)
             .map(|n| {
                 let (mut v, mut g) = ([0.0; 8], [0.0; 8]);
