@@ -29,7 +29,7 @@
 //! stream adds its extrapolated unseen tiles scaled by the dilation's growth.
 
 use std::cell::RefCell;
-use std::collections::{BTreeMap, HashMap, HashSet};
+use std::collections::{BTreeMap, HashMap};
 
 use crate::error::{PlanError, Result};
 use crate::profile::{Profile, FINER_THAN_LEVEL0};
@@ -374,27 +374,35 @@ impl<'p> Model<'p> {
         if let Some(&c) = self.memo.borrow().get(&key) {
             return c;
         }
-        let mut union: HashSet<(i32, i32)> = HashSet::new();
+        // Tiles as packed (x, y) keys, counted by sorting: hashing them was half of planning.
+        let pack = |x: i32, y: i32| (u64::from(x as u32) << 32) | u64::from(y as u32);
+        let (mut union, mut own): (Vec<u64>, Vec<u64>) = (Vec::new(), Vec::new());
         let mut unseen = 0.0;
         for &(s, level, v, d) in &key {
             let taps = &self.streams[s as usize].levels[usize::from(level)];
-            let mut own: HashSet<(i32, i32)> = HashSet::new();
+            own.clear();
             for &(x, y, lo, up) in &taps.tiles {
                 if pick(v, lo, up) == 0 {
                     continue;
                 }
                 for dy in 0..=i32::from(d) {
                     for dx in 0..=i32::from(d) {
-                        own.insert((x + dx, y + dy));
+                        own.push(pack(x + dx, y + dy));
                     }
                 }
             }
+            own.sort_unstable();
+            own.dedup();
             let observed = taps.observed[usize::from(v)];
             if observed > 0.0 {
                 let growth = own.len() as f64 / observed;
                 unseen += (taps.predicted[usize::from(v)] - observed) * growth;
             }
-            union.extend(own);
+            union.extend_from_slice(&own);
+        }
+        if key.len() > 1 {
+            union.sort_unstable();
+            union.dedup();
         }
         let c = union.len() as f64 + unseen;
         self.memo.borrow_mut().insert(key, c);
