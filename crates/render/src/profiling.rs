@@ -33,8 +33,11 @@ use crate::shading::{Direct, GraphSource, TextureEvaluator};
 const BINS: usize = MAX_LEVEL as usize + 2;
 /// While profiling, one evaluation in this many of each node is timed.
 const PROFILE_TIMING_PERIOD: u64 = 4;
-/// One request in this many is timed as a whole (evaluation and tap separately).
-const CALL_TIMING_PERIOD: u64 = 16;
+/// One request in this many is timed as a whole (evaluation and tap separately). Every one: a
+/// request's cost varies 5-fold with its level, and the evaluator's per-node overhead is what
+/// these timings leave after the nodes' own, so one in 16 of a profile's thousand-odd requests
+/// moved it between 90 and 190 ns from run to run; three clock reads are under 1 % of a request.
+const CALL_TIMING_PERIOD: u64 = 1;
 
 /// What to profile.
 #[derive(Clone, Debug)]
@@ -73,6 +76,8 @@ pub struct Profiler {
     shared: bool,
     calls: u64,
     eval_ns: u64,
+    /// The longest timed evaluation (left out of the mean when an outlier: [`graph::robust_mean`]).
+    eval_max_ns: u64,
     tap_ns: u64,
     timed_calls: u64,
     /// Time every call (not one in [`CALL_TIMING_PERIOD`]) and add it to `exact_eval_ns`: set
@@ -94,6 +99,7 @@ impl Profiler {
             shared: false,
             calls: 0,
             eval_ns: 0,
+            eval_max_ns: 0,
             tap_ns: 0,
             timed_calls: 0,
             exact: false,
@@ -140,7 +146,9 @@ impl GraphSource for Profiler {
         self.inner.evaluate(g, request, fp, scratch, out);
         if let (Some(t0), Some(t1)) = (t0, t1) {
             self.tap_ns += (t1 - t0).as_nanos() as u64;
-            self.eval_ns += t1.elapsed().as_nanos() as u64;
+            let ns = t1.elapsed().as_nanos() as u64;
+            self.eval_ns += ns;
+            self.eval_max_ns = self.eval_max_ns.max(ns);
             self.timed_calls += 1;
         }
         if let Some(t) = t_all {
@@ -187,6 +195,7 @@ impl Profiler {
         }
         self.calls += o.calls;
         self.eval_ns += o.eval_ns;
+        self.eval_max_ns = self.eval_max_ns.max(o.eval_max_ns);
         self.tap_ns += o.tap_ns;
         self.timed_calls += o.timed_calls;
         self.warm.outside_ns.extend_from_slice(&o.warm.outside_ns);
@@ -242,6 +251,7 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     // Calibrate first: it also brings the cores out of idle, whose slow clocks would otherwise
     // inflate the first tens of milliseconds of the profile.
     let (lookup_ns, fill_ns_per_texel, timer_ns) = calibrate();
+    warm_up(scene);
     let mut t = trace(scene, opts);
     if t.samples == 0 {
         return Err(crate::error::Error::plain("the profiling render traced no samples; raise the pixel fraction"));
@@ -249,10 +259,11 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
     // Per sample outside textures, from warm samples when there are (profiles of 2+ spp).
     let outside_thread_s = t.profiler.warm.robust_mean().map_or(0.0, |ns| ns * t.samples as f64 * 1e-9);
     let tap = &t.profiler;
-    let per_call = |ns: u64| if tap.timed_calls > 0 { ns as f64 / tap.timed_calls as f64 } else { 0.0 };
-    let texture_thread_s = per_call(tap.eval_ns) * tap.calls as f64 * 1e-9;
-    let tap_thread_s = per_call(tap.tap_ns) * tap.calls as f64 * 1e-9;
-    let node_overhead_ns = node_overhead_ns(&t.stats, texture_thread_s, timer_ns);
+    let eval_ns = graph::robust_mean(tap.eval_ns, tap.timed_calls, tap.eval_max_ns).map_or(0.0, |m| m.0);
+    let texture_thread_s = eval_ns * tap.calls as f64 * 1e-9;
+    let tap_ns = if tap.timed_calls > 0 { tap.tap_ns as f64 / tap.timed_calls as f64 } else { 0.0 };
+    let tap_thread_s = tap_ns * tap.calls as f64 * 1e-9;
+    let node_overhead_ns = node_overhead_ns(&t.stats, &t.binned, texture_thread_s, timer_ns);
     let graphs = scene
         .graphs
         .iter()
@@ -281,6 +292,27 @@ pub fn profile(scene: &Scene, opts: &ProfileOptions) -> crate::error::Result<Pro
         graphs,
         streams: profile_streams(scene, tap),
     })
+}
+
+/// Evaluates every material's graphs once per level, untimed, on every thread of the pool: the
+/// one-time work of a thread's first evaluations (a tiled pattern's memo, 1.7 ms on poster_wall)
+/// is then done before the profile times anything, as it is before most of a final render's.
+fn warm_up(scene: &Scene) {
+    rayon::broadcast(|_| {
+        for m in &scene.materials {
+            for mg in &m.graphs {
+                let g = scene.graphs[mg.graph as usize].graph();
+                let mut scratch = EvalScratch::new(g);
+                let mut out = vec![Filtered::zero(graph::ValueType::Float); mg.order.outputs().len()];
+                let uv = glam::Vec2::new(0.375, 0.625);
+                g.eval(&mg.order, &Footprint::point(uv), &mut scratch, &graph::NoOverride, &mut out);
+                for level in FINER_THAN_LEVEL0..=i32::from(MAX_LEVEL) {
+                    let sigma = (level as f32).exp2() / LEVEL0_TEXELS_PER_UV;
+                    g.eval(&mg.order, &Footprint::isotropic(uv, sigma), &mut scratch, &graph::NoOverride, &mut out);
+                }
+            }
+        }
+    });
 }
 
 /// What the profiling render's buckets recorded, merged.
@@ -341,13 +373,9 @@ fn trace(scene: &Scene, opts: &ProfileOptions) -> Traced {
         t.profiler.merge(p);
         t.samples += c.samples;
         t.first_samples += c.samples - p.warm.outside_ns.len() as u64;
-        if t.binned.is_empty() {
-            t.binned = b.clone();
-        } else {
-            for (x, y) in t.binned.iter_mut().zip(b) {
-                x.ns.iter_mut().zip(&y.ns).for_each(|(p, q)| *p += q);
-                x.count.iter_mut().zip(&y.count).for_each(|(p, q)| *p += q);
-            }
+        t.binned.resize(b.len(), graph::BinnedTimings::default());
+        for (x, y) in t.binned.iter_mut().zip(b) {
+            x.merge(y);
         }
         for (x, y) in t.stats.iter_mut().zip(s) {
             x.merge(y);
@@ -358,14 +386,24 @@ fn trace(scene: &Scene, opts: &ProfileOptions) -> Traced {
 
 /// The evaluator's bookkeeping per node evaluation: graph time (`texture_thread_s`) not inside
 /// any node's own timed work, less the clocks' share.
-fn node_overhead_ns(stats: &[graph::EvalStats], texture_thread_s: f64, timer_ns: f64) -> f64 {
+fn node_overhead_ns(
+    stats: &[graph::EvalStats],
+    binned: &[graph::BinnedTimings],
+    texture_thread_s: f64,
+    timer_ns: f64,
+) -> f64 {
     let (mut evaluations, mut own_s) = (0u64, 0.0);
-    for st in stats {
+    for (st, b) in stats.iter().zip(binned) {
         for (i, &e) in st.evaluations.iter().enumerate() {
             evaluations += e;
-            if st.timed[i] > 0 {
-                let mean = st.timed_ns[i] as f64 / st.timed[i] as f64;
-                own_s += e as f64 * (mean - timer_ns).max(0.0) * 1e-9;
+            // The node's mean over its bins, each bin's outlier left out as in its costs.
+            let (mut ns, mut n) = (0.0, 0u64);
+            for (mean, count) in (0..b.bins).filter_map(|k| b.mean_ns(i, k)) {
+                ns += mean * count as f64;
+                n += count;
+            }
+            if n > 0 {
+                own_s += e as f64 * (ns / n as f64 - timer_ns).max(0.0) * 1e-9;
             }
         }
     }
@@ -448,11 +486,9 @@ fn profile_graph(name: String, g: &Graph, binned: Option<&graph::BinnedTimings>)
             let i = id.0 as usize;
             let cost = match binned {
                 Some(b) if b.bins == BINS => (0..BINS)
-                    .filter(|&k| b.count[i * BINS + k] > 0)
-                    .map(|k| LevelCost {
-                        level: bin_level(k),
-                        ns: b.ns[i * BINS + k] as f64 / b.count[i * BINS + k] as f64,
-                        samples: b.count[i * BINS + k],
+                    .filter_map(|k| {
+                        let (ns, samples) = b.mean_ns(i, k)?;
+                        Some(LevelCost { level: bin_level(k), ns, samples })
                     })
                     .collect(),
                 _ => Vec::new(),
@@ -512,10 +548,11 @@ pub fn calibrate() -> (f64, f64, f64) {
     let fill = |r: TexelRequest| [r.uv.x, r.uv.y, 0.5];
     // Fills: one lookup per tile of level 0 along a row, each filling one new tile.
     let d = f64::from(LEVEL0_TEXELS_PER_UV);
-    // 100 tiles (about 10⁵ texels) and 10⁴ lookups time both to well under the host's own
-    // drift, in about a fifth of the time of the 500 and 4·10⁴ this took before (which was 4 %
-    // of a small `--strategy auto` render, on one thread while the others waited).
-    let tiles = 100;
+    // 32 tiles (about 3·10⁴ texels), 4000 lookups and 4000 clock pairs time each to within a
+    // few per cent, under the host's own drift, in about 1.3 ms: 100 tiles, 10⁴ lookups and
+    // 2·10⁴ clock pairs took 5 ms, as long as the rest of a small render's profile, on one
+    // thread while the others waited.
+    let tiles = 32;
     let texel = Filter::TRILINEAR;
     let t = Instant::now();
     for k in 0..tiles {
@@ -533,7 +570,7 @@ pub fn calibrate() -> (f64, f64, f64) {
         s ^= s << 17;
         (s >> 40) as f32 / (1u64 << 24) as f32
     };
-    let n = 10_000;
+    let n = 4_000;
     let span = (tiles * tile_size as usize) as f32 / LEVEL0_TEXELS_PER_UV;
     let queries: Vec<(glam::Vec2, glam::Mat2)> = (0..n)
         .map(|_| {
@@ -553,7 +590,7 @@ pub fn calibrate() -> (f64, f64, f64) {
     let lookup_ns = t.elapsed().as_secs_f64() * 1e9 / n as f64;
     std::hint::black_box(acc);
     // One timing: two clock reads and the subtraction.
-    let reps = 20_000;
+    let reps = 4_000;
     let t = Instant::now();
     let mut sink = 0u128;
     for _ in 0..reps {
