@@ -111,7 +111,9 @@ struct RenderArgs {
     /// (profile, plan, render), nodes:a,b,c (node names, nodegraph/node), plan:FILE or bake:RES.
     #[arg(long, default_value = "none", value_parser = |s: &str| s.parse::<Strategy>())]
     strategy: Strategy,
-    /// With --strategy auto: the share of the final render's samples the profile takes.
+    /// With --strategy auto: the share of the final render's pixels the profile traces, one
+    /// sample each (of its samples where they evaluate their own first-hit textures, as with
+    /// --per-sample-textures); at least 1024 samples.
     #[arg(long, default_value_t = select_cmd::DEFAULT_PROFILE_SHARE)]
     profile_share: f64,
     /// With --strategy auto: the report folder (profile.json, plan.json, table.md, plots);

@@ -13,12 +13,14 @@ use std::path::{Path, PathBuf};
 
 use crate::{load_scene, parse_defines, write_atomic, DEFAULT_SCENE};
 
-/// Default share of the final render's samples that `--strategy auto` profiles.
+/// Default share of the final render's pixels that `--strategy auto` profiles.
 pub const DEFAULT_PROFILE_SHARE: f64 = 0.01;
 /// Share of the profiled pixels that take a second, timed sample (see `ProfileOptions`).
 const WARM_FRACTION: f64 = 0.25;
-/// Fewest samples a profile takes (or every pixel once).
-const MIN_PROFILE_SAMPLES: u64 = 4096;
+/// Fewest samples a profile takes (or every pixel once). Predictions of the demo scenes at
+/// 128² and 16 spp from 1024 samples erred as much as from 4096 (the host's drift between runs
+/// dominates either) and chose the same nodes, at a quarter of the cost.
+const MIN_PROFILE_SAMPLES: u64 = 1024;
 
 #[derive(clap::Args, Debug)]
 pub struct ProfileArgs {
@@ -119,13 +121,20 @@ pub fn profile_scene(scene: &Scene, settings: RenderSettings, pixel_fraction: f6
     Ok(render::profiling::profile(scene, &opts)?)
 }
 
-/// The profile's settings for a final render: `share` of its samples (at least
-/// [`MIN_PROFILE_SAMPLES`]) as one sample on a hashed subset of the pixels (a quarter of them
-/// take a second, timed sample; see docs/selective-caching.md), or more samples per pixel when
-/// every pixel is traced.
+/// The profile's settings for a final render: `share` of its pixels (at least
+/// [`MIN_PROFILE_SAMPLES`]) traced with one sample each on a hashed subset of the pixels (a
+/// quarter of them take a second, timed sample; see docs/selective-caching.md), or more samples
+/// per pixel when every pixel is traced. Where the final render's samples share their pixel's
+/// first-hit textures (the default), those evaluations, one per pixel whatever the sample count,
+/// are most of its texture time, and every profile sample pays one: a share of the samples was
+/// a share of the first-hit evaluations `spp` times as large (a quarter of them for a 128² image
+/// at 16 spp). Where they do not share them (`--per-sample-textures`, other footprints or
+/// filter scales) every sample evaluates its own, and the share is one of the samples.
 pub fn auto_profile_settings(scene: &Scene, final_settings: RenderSettings, share: f64) -> (RenderSettings, f64) {
     let pixels = u64::from(scene.camera.width) * u64::from(scene.camera.height);
-    let want = ((pixels * u64::from(final_settings.spp)) as f64 * share).max(MIN_PROFILE_SAMPLES as f64);
+    let per_pixel =
+        if render::integrator::shares_pixel_textures(&final_settings) { 1 } else { u64::from(final_settings.spp) };
+    let want = ((pixels * per_pixel) as f64 * share).max(MIN_PROFILE_SAMPLES as f64);
     let spp = (want / pixels as f64).ceil().max(1.0) as u32;
     let fraction = (want / (pixels as f64 * f64::from(spp))).min(1.0);
     // A different seed: the profile's samples are not the final render's.

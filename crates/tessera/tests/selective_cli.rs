@@ -96,6 +96,45 @@ fn auto_strategy_profiles_plans_renders_and_reports() {
     }
 }
 
+/// `--profile-share` is a share of the pixels where a pixel's samples share their first-hit
+/// textures (one profile sample per traced pixel, a quarter of them a second, timed one), and of
+/// the samples where every sample evaluates its own.
+#[test]
+fn the_profile_share_counts_pixels_where_samples_share_their_textures() {
+    let dir = temp_dir("share");
+    let profile_samples = |extra: &[&str], name: &str| {
+        let (out, json_name) = (format!("{name}.exr"), format!("{name}.json"));
+        let mut args = vec![
+            "render",
+            "-D",
+            "res=64",
+            "--spp",
+            "16",
+            "--strategy",
+            "auto",
+            "--profile-share",
+            "0.5",
+            "--quiet",
+            "--out",
+            &out,
+            "--stats-json",
+            &json_name,
+        ];
+        args.extend_from_slice(extra);
+        ok(&tessera(&dir, &args));
+        let s = json(dir.join(&json_name));
+        let p = json(dir.join(format!("{name}.report")).join("profile.json"));
+        (s["plan"]["profile_samples"].as_u64().unwrap(), p["render"]["spp"].as_u64().unwrap())
+    };
+    // Half the 4096 pixels, one sample each, and about a quarter of those a second.
+    let (shared, spp) = profile_samples(&[], "a");
+    assert_eq!(spp, 1);
+    assert!((2048 + 400..=2048 + 650).contains(&shared), "{shared}");
+    // Half the 65 536 samples: 8 on every pixel.
+    let (own, spp) = profile_samples(&["--per-sample-textures"], "b");
+    assert_eq!((own, spp), (32768, 8));
+}
+
 #[test]
 fn bad_profiles_plans_and_budgets_are_clear_errors() {
     let dir = temp_dir("bad");

@@ -11,7 +11,7 @@
 
 mod path;
 
-pub use path::{radiance, recentre_fraction, spawn_ray, MAX_PASS_THROUGH};
+pub use path::{radiance, recentre_fraction, shares_pixel_textures, spawn_ray, MAX_PASS_THROUGH};
 
 use crate::camera::CameraRay;
 use crate::film::{Image, PixelSum};

@@ -120,7 +120,7 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) ->
 /// Whether camera rays' first hits read their pixel's shared textures: with covariance
 /// footprints centred all the way on the pixel centre (the whole footprint as the filter,
 /// [`recentre_fraction`] 1), unless [`RenderSettings::per_sample_textures`] asks otherwise.
-fn shares_pixel_textures(settings: &RenderSettings) -> bool {
+pub fn shares_pixel_textures(settings: &RenderSettings) -> bool {
     !settings.per_sample_textures
         && settings.footprint == FootprintMode::Covariance
         && recentre_fraction(settings.filter_scale.at(settings.spp)) >= 1.0
