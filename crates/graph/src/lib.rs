@@ -114,8 +114,8 @@ pub const MAX_INSTANCE_DEPTH: usize = 64;
 pub use bake::{BakeError, BakeFilter, BakeSettings, BakeSource, BakedImage, Orientation};
 pub use error::{BuildError, LoadError, LoadErrorKind, Location, Unsupported};
 pub use eval::{
-    robust_mean, BinnedTimings, EvalOrder, EvalScratch, EvalStats, NoOverride, NodeOverride, NonFinite, Work,
-    TIMING_PERIOD,
+    clock_pair_ns, robust_mean, BinnedTimings, EvalOrder, EvalScratch, EvalStats, NoOverride, NodeOverride, NonFinite,
+    Work, TIMING_PERIOD,
 };
 pub use graph::{GeomProp, Graph, GraphBuilder, GraphOutput, NodeId, OutputId, Source};
 pub use matrix::Matrix;
