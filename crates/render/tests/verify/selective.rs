@@ -154,6 +154,34 @@ fn plans_fit_their_budget() {
     }
 }
 
+/// With level thresholds the plan is predicted no slower than the materials' outputs cached
+/// from any one level for all of them: caching outputs only for coarse requests (secondary
+/// bounces) can win where caching them at every level loses, and the planner must find it.
+#[test]
+fn thresholded_plans_beat_outputs_cached_from_any_level() {
+    for (name, spp) in [("marble.xml", 64), ("brick_moss.xml", 16)] {
+        let scene = scene(name, 32);
+        let profile = timing_free(take_profile(&scene, 0.5, spp));
+        let target = Target { samples: u64::from(32 * 32 * spp), threads: 2 };
+        let model = Model::new(&profile, target).unwrap();
+        let r = plan::search(&model, SearchOptions::with_budget(1e9)).unwrap();
+        let max = profile.cache.max_level;
+        for level in 0..=max {
+            let mut outputs = PlanSpec::outputs(&profile);
+            for c in outputs.cached.iter_mut().flatten().filter(|c| c.is_some()) {
+                *c = Some(level);
+            }
+            let t = model.predict(&outputs).render_s;
+            assert!(
+                r.prediction.render_s <= t * (1.0 + 1e-9),
+                "{name}: the plan ({}, {:.5} s) is predicted slower than outputs from level {level} ({t:.5} s)",
+                r.method,
+                r.prediction.render_s
+            );
+        }
+    }
+}
+
 /// The planner's local search finds the exhaustive optimum when both can run.
 #[test]
 fn local_search_matches_exhaustive_search_on_a_small_graph() {
