@@ -73,7 +73,7 @@ pub fn candidates(model: &Model) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for (g, graph) in p.graphs.iter().enumerate() {
         for (n, node) in graph.nodes.iter().enumerate() {
-            if node.cacheable && reached[g][n] {
+            if node.cacheable && node.exact_when_cached && reached[g][n] {
                 out.push((g, n));
             }
         }

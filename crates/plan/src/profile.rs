@@ -140,6 +140,11 @@ pub struct ProfileGraph {
     pub nodes: Vec<ProfileNode>,
 }
 
+/// `true`, the default of [`ProfileNode::exact_when_cached`] (profiles written before it).
+fn yes() -> bool {
+    true
+}
+
 /// One node.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct ProfileNode {
@@ -152,6 +157,14 @@ pub struct ProfileNode {
     /// Whether the renderer can cache it in texture space (depends on uv alone, has at most 3
     /// channels, and is not a coordinate or a constant).
     pub cacheable: bool,
+    /// Whether caching it keeps the images' textures: its tiles hold means only (no spread over
+    /// the footprint, no gradient), and every graph output it reaches depends on its mean alone
+    /// (through sums, channel moves, and products, mixes and remaps whose other inputs are
+    /// constants). Where a nonlinear node (a `smoothstep` mask) reads it, a cached value sharpens
+    /// what the filtered evaluation blurs: the planner does not choose such nodes (a plan file or
+    /// `nodes:` still can). Absent: true.
+    #[serde(default = "yes")]
+    pub exact_when_cached: bool,
     /// Indices of the nodes it reads (each smaller than its own).
     pub inputs: Vec<u32>,
     /// Its own cost per evaluation by level (inputs not included).
@@ -183,6 +196,10 @@ pub struct Stream {
     pub requests: Vec<LevelCount>,
     /// By level: the tiles trilinear lookups of these requests read.
     pub tiles: Vec<LevelTiles>,
+    /// `[u_min, v_min, u_max, v_max]`: the uv range of the surfaces that carry the material,
+    /// where its requests can land (absent: unknown).
+    #[serde(default)]
+    pub uv_bounds: Option<[f64; 4]>,
 }
 
 impl Stream {
@@ -256,6 +273,15 @@ impl Profile {
     pub fn validate(&self) -> Result<()> {
         if self.schema != PROFILE_SCHEMA {
             return Err(bad(format!("schema is '{}', expected '{PROFILE_SCHEMA}'", self.schema)));
+        }
+        for (k, st) in self.streams.iter().enumerate() {
+            if let Some(b) = st.uv_bounds {
+                if !(b.iter().all(|x| x.is_finite()) && b[0] <= b[2] && b[1] <= b[3]) {
+                    return Err(bad(format!(
+                        "streams[{k}].uv_bounds must be finite [u_min, v_min, u_max, v_max], got {b:?}"
+                    )));
+                }
+            }
         }
         let c = &self.cache;
         if !(c.tile_size.is_power_of_two() && (2..=1024).contains(&c.tile_size)) {

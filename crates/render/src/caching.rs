@@ -131,6 +131,46 @@ pub(crate) fn worth_caching(g: &Graph, id: NodeId) -> bool {
     !matches!(g.node_category(id), "texcoord" | "constant") && g.node_type(id) != ValueType::Vector2 && g.is_uv_only(id)
 }
 
+/// Per node of `g`: whether a cached value of it (a mean: tiles hold no spread and no gradient)
+/// leaves the mean of every graph output it reaches as the filtered evaluation gives it. True
+/// where each path to the outputs runs through sums, differences, inversions and channel moves,
+/// or through products, quotients, mixes and remaps whose other inputs are constants: the means
+/// of those depend on their inputs' means alone. A path through anything else (a `smoothstep`
+/// or `clamp` of it, a product of two varying values, whose mean has their covariance) would
+/// read the missing spread: caching rusted_metal's `rust_field`, read by smoothstep masks, made
+/// `auto`'s image 2–6× further from the uncached one.
+pub(crate) fn means_suffice(g: &Graph) -> Vec<bool> {
+    let n = g.node_count();
+    let mut consumers: Vec<Vec<(NodeId, &'static str)>> = vec![Vec::new(); n];
+    for c in g.node_ids() {
+        for (name, s) in g.node_inputs(c) {
+            if let Source::Node { node, .. } = s {
+                consumers[node.0 as usize].push((c, name));
+            }
+        }
+    }
+    // Consumers have larger ids (the order is topological): decide them first.
+    let mut ok = vec![true; n];
+    for i in (0..n).rev() {
+        ok[i] = consumers[i].iter().all(|&(c, input)| ok[c.0 as usize] && passes_means(g, c, input));
+    }
+    ok
+}
+
+/// Whether node `c`'s mean depends on its input `input`'s mean alone (not its spread or gradient).
+fn passes_means(g: &Graph, c: NodeId, input: &str) -> bool {
+    let others_constant =
+        g.node_inputs(c).iter().filter(|(name, _)| *name != input).all(|(_, s)| matches!(s, Source::Constant(_)));
+    match g.node_category(c) {
+        "add" | "subtract" | "invert" | "convert" | "extract" | "separate2" | "separate3" | "separate4"
+        | "combine2" | "combine3" | "combine4" | "dot" => true,
+        "multiply" | "mix" => others_constant,
+        "divide" => input == "in1" && others_constant,
+        "remap" => input == "in" && others_constant,
+        _ => false,
+    }
+}
+
 /// Marks the nodes of `plan` in `chosen` with their finest cached levels; errors name nodes the
 /// scene's graphs do not have or cannot cache.
 fn select_plan(
@@ -604,6 +644,88 @@ impl NodeOverride for GraphOverride<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Answers one node with a fixed value (its own value stripped of spread and gradient, as a
+    /// means-only tile would).
+    struct Fixed(NodeId, Filtered);
+
+    impl NodeOverride for Fixed {
+        fn lookup(&self, node: NodeId, _: &Footprint) -> Option<Filtered> {
+            (node == self.0).then_some(self.1)
+        }
+    }
+
+    /// Checked by evaluation, not by the rule's own reasoning: for every cacheable node of the
+    /// demo graphs, the outputs are evaluated with the node's value replaced by its mean alone, at
+    /// random uv and footprints. Where `means_suffice` says yes, every output's mean must be
+    /// unchanged; and the rule must say no somewhere it matters (rusted_metal's `rust_field`, read
+    /// by smoothstep masks, whose replacement moves some output).
+    #[test]
+    fn means_suffice_where_replacing_a_node_by_its_mean_keeps_the_outputs_means() {
+        let scenes = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+        let mut s = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f32 / (1u64 << 53) as f32
+        };
+        let (mut checked, mut moved_where_refused) = (0, 0);
+        for name in ["rusted_metal.xml", "brick_moss.xml", "tiles_planks.xml", "poster_wall.xml", "marble.xml"] {
+            let scene = crate::loader::load_file(&scenes.join(name), &[]).unwrap_or_else(|e| panic!("{e}"));
+            for sg in &scene.graphs {
+                let g = sg.graph();
+                let ok = means_suffice(g);
+                let outputs: Vec<graph::OutputId> = g.outputs().iter().filter_map(|o| g.output_id(&o.name)).collect();
+                let order = g.eval_order(&outputs);
+                let mut scratch = EvalScratch::new(g);
+                let (mut plain, mut fixed) = (
+                    vec![Filtered::zero(ValueType::Float); outputs.len()],
+                    vec![Filtered::zero(ValueType::Float); outputs.len()],
+                );
+                for id in g.node_ids().filter(|&id| worth_caching(g, id) && channels(g.node_type(id)).is_some()) {
+                    let mut moved = false;
+                    for _ in 0..24 {
+                        let uv = glam::Vec2::new(next() * 4.0 - 1.0, next() * 4.0 - 1.0);
+                        let sigma = 10f32.powf(next() * 5.0 - 5.0);
+                        let fp = Footprint::isotropic(uv, sigma);
+                        g.eval(&order, &fp, &mut scratch, &graph::NoOverride, &mut plain);
+                        let mut v = g.eval_node_direct(id, &fp, &mut scratch, &graph::NoOverride);
+                        for c in v.ch.iter_mut() {
+                            *c = Moments::constant(c.mean);
+                        }
+                        g.eval(&order, &fp, &mut scratch, &Fixed(id, v), &mut fixed);
+                        for (a, b) in plain.iter().zip(&fixed) {
+                            for k in 0..a.ty.channels() {
+                                let (x, y) = (a.ch[k].mean, b.ch[k].mean);
+                                let same = (x - y).abs() <= 1e-5 * (1.0 + x.abs());
+                                assert!(
+                                    same || !ok[id.0 as usize],
+                                    "{name}: node {} is said to need its mean alone, but an output's mean moved \
+                                     from {x} to {y} at uv {uv}, σ {sigma}",
+                                    g.node_name(id)
+                                );
+                                moved |= !same;
+                            }
+                        }
+                    }
+                    checked += usize::from(ok[id.0 as usize]);
+                    moved_where_refused += usize::from(moved && !ok[id.0 as usize]);
+                    if g.node_name(id) == "NG_rust/rust_field" {
+                        assert!(
+                            !ok[id.0 as usize] && moved,
+                            "rust_field: refused {} moved {moved}",
+                            !ok[id.0 as usize]
+                        );
+                    }
+                }
+            }
+        }
+        assert!(
+            checked >= 10 && moved_where_refused >= 5,
+            "{checked} accepted, {moved_where_refused} refused and moved"
+        );
+    }
 
     /// The cache picks a cached node's level with `cache::level_for` (f32) and the profiler and
     /// the footprint AOV with `footprint::lod` (f64): the planner's predictions assume they agree.
