@@ -510,12 +510,12 @@ mod tests {
             bytes_per_channel: 2,
             tile_overhead_bytes: 0,
         };
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64
+        // Additive recurrences (the plastic number's): uniform enough, and independent of the
+        // tile grid, for the simulated lookups.
+        let (mut k, a1, a2) = (0u64, 0.754_877_666_246_692_7, 0.569_840_290_998_053_3);
+        let mut next2 = || {
+            k += 1;
+            (((k as f64) * a1).fract(), ((k as f64) * a2).fract())
         };
         let mut checked = 0;
         for (b, level, draws) in [
@@ -534,7 +534,8 @@ mod tests {
             for _ in 0..trials {
                 let mut seen = std::collections::HashSet::new();
                 for _ in 0..draws as usize {
-                    let (u, v) = (b[0] + (b[2] - b[0]) * next(), b[1] + (b[3] - b[1]) * next());
+                    let (x, y) = next2();
+                    let (u, v) = (b[0] + (b[2] - b[0]) * x, b[1] + (b[3] - b[1]) * y);
                     seen.insert((tile(u), tile(v)));
                 }
                 total += seen.len();

@@ -645,6 +645,16 @@ impl NodeOverride for GraphOverride<'_, '_> {
 mod tests {
     use super::*;
 
+    /// Uniform numbers in [0, 1) from a xorshift generator seeded with `seed` (not 0).
+    fn xorshift(mut s: u64) -> impl FnMut() -> f64 {
+        move || {
+            s ^= s << 13;
+            s ^= s >> 7;
+            s ^= s << 17;
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        }
+    }
+
     /// Answers one node with a fixed value (its own value stripped of spread and gradient, as a
     /// means-only tile would).
     struct Fixed(NodeId, Filtered);
@@ -663,13 +673,8 @@ mod tests {
     #[test]
     fn means_suffice_where_replacing_a_node_by_its_mean_keeps_the_outputs_means() {
         let scenes = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
-        let mut s = 0x2545_F491_4F6C_DD1Du64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f32 / (1u64 << 53) as f32
-        };
+        let mut uniform = xorshift(0x2545_F491_4F6C_DD1D);
+        let mut next = || uniform() as f32;
         let (mut checked, mut moved_where_refused) = (0, 0);
         for name in ["rusted_metal.xml", "brick_moss.xml", "tiles_planks.xml", "poster_wall.xml", "marble.xml"] {
             let scene = crate::loader::load_file(&scenes.join(name), &[]).unwrap_or_else(|e| panic!("{e}"));
@@ -731,13 +736,7 @@ mod tests {
     /// the footprint AOV with `footprint::lod` (f64): the planner's predictions assume they agree.
     #[test]
     fn cache_levels_and_footprint_lods_agree() {
-        let mut s = 0x9E37_79B9_7F4A_7C15u64;
-        let mut next = || {
-            s ^= s << 13;
-            s ^= s >> 7;
-            s ^= s << 17;
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut next = xorshift(0x9E37_79B9_7F4A_7C15);
         let mut covs: Vec<glam::DMat2> = (0..20_000)
             .map(|_| {
                 // A covariance R diag(σ₁², σ₂²) Rᵀ with σ from 1e-9 to 1e3 uv and any orientation.
