@@ -437,19 +437,19 @@ const FEW_TILES: f64 = 4.0;
 /// lookup within half a texel of the range's edge reads. On marble at 64² and 16 spp the profile
 /// saw one tile of level 10 where the render filled four (the four around uv 0, a floor's uv
 /// starting there); outputs cached from level 10 were predicted 18 tiles each against 26 filled,
-/// and each fill evaluates the node's upstream at 33² texels.
+/// and each fill evaluates the node's upstream at all (T + 1)² texels of a tile.
 fn reachable(b: [f64; 4], geo: &crate::profile::CacheGeometry, level: usize, draws: f64) -> Option<f64> {
     let d = geo.level0_texels_per_uv * (-(level as f64)).exp2();
     let t = f64::from(geo.tile_size);
     // Per axis: the tiles the range reaches and each one's share of it.
-    let axis = |lo: f64, hi: f64| -> Vec<f64> {
+    let axis = |lo: f64, hi: f64| -> Option<Vec<f64>> {
         let tile = |u: f64| ((u * d - 0.5) / t).floor();
         let (first, last) = (tile(lo), tile(hi));
         if !(first.is_finite() && last.is_finite()) || last - first >= FEW_TILES {
-            return vec![f64::INFINITY; 1 + FEW_TILES as usize];
+            return None;
         }
         if hi <= lo {
-            return vec![1.0];
+            return Some(vec![1.0]);
         }
         let mut shares = Vec::new();
         let mut i = first;
@@ -459,10 +459,10 @@ fn reachable(b: [f64; 4], geo: &crate::profile::CacheGeometry, level: usize, dra
             shares.push(((z - a) / (hi - lo)).max(0.0));
             i += 1.0;
         }
-        shares
+        Some(shares)
     };
-    let (us, vs) = (axis(b[0], b[2]), axis(b[1], b[3]));
-    if (us.len() * vs.len()) as f64 > FEW_TILES || us.iter().chain(&vs).any(|s| !s.is_finite()) {
+    let (us, vs) = (axis(b[0], b[2])?, axis(b[1], b[3])?);
+    if (us.len() * vs.len()) as f64 > FEW_TILES {
         return None;
     }
     Some(us.iter().flat_map(|a| vs.iter().map(move |c| 1.0 - (1.0 - a * c).powf(draws))).sum())
