@@ -645,7 +645,7 @@ impl NodeOverride for GraphOverride<'_, '_> {
 mod tests {
     use super::*;
 
-    /// Uniform numbers in [0, 1) from a xorshift generator seeded with `seed` (not 0).
+    /// Uniform numbers in [0, 1) from a xorshift generator seeded with `s` (not 0).
     fn xorshift(mut s: u64) -> impl FnMut() -> f64 {
         move || {
             s ^= s << 13;
