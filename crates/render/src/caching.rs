@@ -665,70 +665,102 @@ mod tests {
         }
     }
 
-    /// Checked by evaluation, not by the rule's own reasoning: for every cacheable node of the
-    /// demo graphs, the outputs are evaluated with the node's value replaced by its mean alone, at
-    /// random uv and footprints. Where `means_suffice` says yes, every output's mean must be
-    /// unchanged; and the rule must say no somewhere it matters (rusted_metal's `rust_field`, read
-    /// by smoothstep masks, whose replacement moves some output).
-    #[test]
-    fn means_suffice_where_replacing_a_node_by_its_mean_keeps_the_outputs_means() {
-        let scenes = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
-        let mut uniform = xorshift(0x2545_F491_4F6C_DD1D);
-        let mut next = || uniform() as f32;
-        let (mut checked, mut moved_where_refused) = (0, 0);
-        for name in ["rusted_metal.xml", "brick_moss.xml", "tiles_planks.xml", "poster_wall.xml", "marble.xml"] {
-            let scene = crate::loader::load_file(&scenes.join(name), &[]).unwrap_or_else(|e| panic!("{e}"));
-            for sg in &scene.graphs {
-                let g = sg.graph();
-                let ok = means_suffice(g);
-                let outputs: Vec<graph::OutputId> = g.outputs().iter().filter_map(|o| g.output_id(&o.name)).collect();
-                let order = g.eval_order(&outputs);
-                let mut scratch = EvalScratch::new(g);
-                let (mut plain, mut fixed) = (
-                    vec![Filtered::zero(ValueType::Float); outputs.len()],
-                    vec![Filtered::zero(ValueType::Float); outputs.len()],
-                );
-                for id in g.node_ids().filter(|&id| worth_caching(g, id) && channels(g.node_type(id)).is_some()) {
-                    let mut moved = false;
-                    for _ in 0..24 {
-                        let uv = glam::Vec2::new(next() * 4.0 - 1.0, next() * 4.0 - 1.0);
-                        let sigma = 10f32.powf(next() * 5.0 - 5.0);
-                        let fp = Footprint::isotropic(uv, sigma);
-                        g.eval(&order, &fp, &mut scratch, &graph::NoOverride, &mut plain);
-                        let mut v = g.eval_node_direct(id, &fp, &mut scratch, &graph::NoOverride);
-                        for c in v.ch.iter_mut() {
-                            *c = Moments::constant(c.mean);
-                        }
-                        g.eval(&order, &fp, &mut scratch, &Fixed(id, v), &mut fixed);
-                        for (a, b) in plain.iter().zip(&fixed) {
-                            for k in 0..a.ty.channels() {
-                                let (x, y) = (a.ch[k].mean, b.ch[k].mean);
-                                let same = (x - y).abs() <= 1e-5 * (1.0 + x.abs());
-                                assert!(
-                                    same || !ok[id.0 as usize],
-                                    "{name}: node {} is said to need its mean alone, but an output's mean moved \
-                                     from {x} to {y} at uv {uv}, σ {sigma}",
-                                    g.node_name(id)
-                                );
-                                moved |= !same;
-                            }
-                        }
-                    }
-                    checked += usize::from(ok[id.0 as usize]);
-                    moved_where_refused += usize::from(moved && !ok[id.0 as usize]);
-                    if g.node_name(id) == "NG_rust/rust_field" {
+    /// For every cacheable node of `g`: whether replacing its value by its mean alone (as a
+    /// means-only tile would) moved some output's mean at random uv and footprints; asserts it
+    /// never does where `means_suffice` says it may not. Returns (accepted, refused and moved).
+    fn check_means_suffice(name: &str, g: &Graph, next: &mut impl FnMut() -> f32) -> (usize, usize) {
+        let ok = means_suffice(g);
+        let outputs: Vec<graph::OutputId> = g.outputs().iter().filter_map(|o| g.output_id(&o.name)).collect();
+        let order = g.eval_order(&outputs);
+        let mut scratch = EvalScratch::new(g);
+        let (mut plain, mut fixed) = (
+            vec![Filtered::zero(ValueType::Float); outputs.len()],
+            vec![Filtered::zero(ValueType::Float); outputs.len()],
+        );
+        let (mut accepted, mut moved_where_refused) = (0, 0);
+        for id in g.node_ids().filter(|&id| worth_caching(g, id) && channels(g.node_type(id)).is_some()) {
+            let mut moved = false;
+            for _ in 0..24 {
+                let uv = glam::Vec2::new(next() * 4.0 - 1.0, next() * 4.0 - 1.0);
+                let sigma = 10f32.powf(next() * 5.0 - 5.0);
+                let fp = Footprint::isotropic(uv, sigma);
+                g.eval(&order, &fp, &mut scratch, &graph::NoOverride, &mut plain);
+                let mut v = g.eval_node_direct(id, &fp, &mut scratch, &graph::NoOverride);
+                for c in v.ch.iter_mut() {
+                    *c = Moments::constant(c.mean);
+                }
+                g.eval(&order, &fp, &mut scratch, &Fixed(id, v), &mut fixed);
+                for (a, b) in plain.iter().zip(&fixed) {
+                    for k in 0..a.ty.channels() {
+                        let (x, y) = (a.ch[k].mean, b.ch[k].mean);
+                        let same = x.to_bits() == y.to_bits() || (x - y).abs() <= 1e-5 * (1.0 + x.abs());
                         assert!(
-                            !ok[id.0 as usize] && moved,
-                            "rust_field: refused {} moved {moved}",
-                            !ok[id.0 as usize]
+                            same || !ok[id.0 as usize],
+                            "{name}: node {} is said to need its mean alone, but an output's mean moved \
+                             from {x} to {y} at uv {uv}, σ {sigma}",
+                            g.node_name(id)
                         );
+                        moved |= !same;
                     }
                 }
             }
+            accepted += usize::from(ok[id.0 as usize]);
+            moved_where_refused += usize::from(moved && !ok[id.0 as usize]);
+            if g.node_name(id) == "NG_rust/rust_field" {
+                assert!(!ok[id.0 as usize] && moved, "rust_field: refused {} moved {moved}", !ok[id.0 as usize]);
+            }
         }
-        assert!(
-            checked >= 10 && moved_where_refused >= 5,
-            "{checked} accepted, {moved_where_refused} refused and moved"
+        (accepted, moved_where_refused)
+    }
+
+    /// Checked by evaluation, not by the rule's own reasoning: every cacheable node of five demo
+    /// graphs and of MaterialX's own test-suite documents (`shared/mtlx-suite`, written
+    /// elsewhere) is replaced by its mean alone at random uv and footprints. Where
+    /// `means_suffice` says yes, every output's mean must be unchanged; and the rule must say no
+    /// somewhere it matters (rusted_metal's `rust_field`, read by smoothstep masks, whose
+    /// replacement moves some output).
+    #[test]
+    fn means_suffice_where_replacing_a_node_by_its_mean_keeps_the_outputs_means() {
+        let root = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../..");
+        let mut uniform = xorshift(0x2545_F491_4F6C_DD1D);
+        let mut next = || uniform() as f32;
+        let add = |t: &mut (usize, usize), (a, m): (usize, usize)| *t = (t.0 + a, t.1 + m);
+        let mut demo = (0, 0);
+        for name in ["rusted_metal.xml", "brick_moss.xml", "tiles_planks.xml", "poster_wall.xml", "marble.xml"] {
+            let scene =
+                crate::loader::load_file(&root.join("scenes").join(name), &[]).unwrap_or_else(|e| panic!("{e}"));
+            for sg in &scene.graphs {
+                add(&mut demo, check_means_suffice(name, sg.graph(), &mut next));
+            }
+        }
+        assert!(demo.0 >= 10 && demo.1 >= 5, "{} accepted, {} refused and moved", demo.0, demo.1);
+        // MaterialX's documents (where the shared folder is beside the clone).
+        let suite = root.join("../shared/mtlx-suite/docs");
+        let mut docs: Vec<std::path::PathBuf> = Vec::new();
+        let mut stack = vec![suite];
+        while let Some(dir) = stack.pop() {
+            for e in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+                let p = e.path();
+                if p.is_dir() {
+                    stack.push(p);
+                } else if p.extension().is_some_and(|x| x == "mtlx") {
+                    docs.push(p);
+                }
+            }
+        }
+        docs.sort();
+        let opts = graph::LoadOptions { lenient: true, ..graph::LoadOptions::default() };
+        let mut suite_totals = (0, 0);
+        for p in &docs {
+            if let Ok(doc) = graph::Document::load_with(p, &opts) {
+                add(&mut suite_totals, check_means_suffice(&p.display().to_string(), doc.graph(), &mut next));
+            }
+        }
+        eprintln!(
+            "{} MaterialX documents: {} nodes accepted, {} refused and moved",
+            docs.len(),
+            suite_totals.0,
+            suite_totals.1
         );
     }
 
