@@ -735,19 +735,12 @@ mod tests {
         }
         assert!(demo.0 >= 10 && demo.1 >= 5, "{} accepted, {} refused and moved", demo.0, demo.1);
         // MaterialX's documents (where the shared folder is beside the clone).
-        let suite = root.join("../shared/mtlx-suite/docs");
-        let mut docs: Vec<std::path::PathBuf> = Vec::new();
-        let mut stack = vec![suite];
-        while let Some(dir) = stack.pop() {
-            for e in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-                let p = e.path();
-                if p.is_dir() {
-                    stack.push(p);
-                } else if p.extension().is_some_and(|x| x == "mtlx") {
-                    docs.push(p);
-                }
-            }
-        }
+        // Its documents lie one folder deep, by category.
+        let list = |d: std::path::PathBuf| std::fs::read_dir(d).into_iter().flatten().flatten().map(|e| e.path());
+        let mut docs: Vec<std::path::PathBuf> = list(root.join("../shared/mtlx-suite/docs"))
+            .flat_map(list)
+            .filter(|p| p.extension().is_some_and(|x| x == "mtlx"))
+            .collect();
         docs.sort();
         let opts = graph::LoadOptions { lenient: true, ..graph::LoadOptions::default() };
         let mut suite_totals = (0, 0);
