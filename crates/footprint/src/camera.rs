@@ -3,7 +3,7 @@
 use glam::{DMat2, DVec2, DVec3};
 
 use crate::mat::clamp_covariance;
-use crate::vertex::Vertex;
+use crate::vertex::{LocalGeometry, Vertex};
 use crate::{MAX_VARIANCE, MIN_COSINE};
 
 /// Standard deviation of the pixel filter, in pixels.
@@ -41,7 +41,20 @@ pub fn first_vertex_jacobian(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    let g = hit.local().geometric_normal;
+    first_vertex_jacobian_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, &hit.local())
+}
+
+/// [`first_vertex_jacobian`] with `hit`'s [`LocalGeometry`] already computed (a path computes it
+/// once per vertex: the tracker, the texture footprint and the recentring all read it).
+pub fn first_vertex_jacobian_with(
+    camera_origin: DVec3,
+    dir: DVec3,
+    d_dir_dpx: DVec3,
+    d_dir_dpy: DVec3,
+    hit: &Vertex,
+    local: &LocalGeometry,
+) -> DMat2 {
+    let g = local.geometric_normal;
     let s = (hit.p - camera_origin).dot(dir) / dir.length_squared();
     let dpx = transfer(DVec3::ZERO, dir, d_dir_dpx, s, g);
     let dpy = transfer(DVec3::ZERO, dir, d_dir_dpy, s, g);
@@ -62,7 +75,19 @@ pub fn first_vertex_variance(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    let j = first_vertex_jacobian(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit);
+    first_vertex_variance_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, &hit.local())
+}
+
+/// [`first_vertex_variance`] with `hit`'s [`LocalGeometry`] already computed.
+pub fn first_vertex_variance_with(
+    camera_origin: DVec3,
+    dir: DVec3,
+    d_dir_dpx: DVec3,
+    d_dir_dpy: DVec3,
+    hit: &Vertex,
+    local: &LocalGeometry,
+) -> DMat2 {
+    let j = first_vertex_jacobian_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, local);
     let v = j * j.transpose() * (PIXEL_SIGMA * PIXEL_SIGMA);
     clamp_covariance(v, MAX_VARIANCE).cov
 }

@@ -114,9 +114,23 @@ pub fn constraint_derivatives_with(
     ln: &LocalGeometry,
     scatter: Scatter,
 ) -> ConstraintDerivatives {
+    constraint_derivatives_from(prev.p, &lp.tangent_map, cur, lc, next, ln, scatter)
+}
+
+/// [`constraint_derivatives_with`] reading of `x_{i−1}` only what `A_i` depends on: its
+/// position and its tangent map (all a tracker keeps of it).
+pub(crate) fn constraint_derivatives_from(
+    prev_p: DVec3,
+    prev_tangent_map: &[DVec3; 2],
+    cur: &Vertex,
+    lc: &LocalGeometry,
+    next: &Vertex,
+    ln: &LocalGeometry,
+    scatter: Scatter,
+) -> ConstraintDerivatives {
     let (t, b, n) = (cur.t, cur.b, cur.n);
 
-    let (wi, li) = unit_and_length(prev.p - cur.p);
+    let (wi, li) = unit_and_length(prev_p - cur.p);
     let (wo, lo) = unit_and_length(next.p - cur.p);
     let (ci, co) = coefficients(scatter);
     let h = wi * ci + wo * co;
@@ -129,7 +143,7 @@ pub fn constraint_derivatives_with(
     let dwi = |v: DVec3| (v - wi * wi.dot(v)) * (ci / li);
     let dwo = |v: DVec3| (v - wo * wo.dot(v)) * (co / lo);
 
-    let a = DMat2::from_cols(g(dwi(lp.tangent_map[0])), g(dwi(lp.tangent_map[1])));
+    let a = DMat2::from_cols(g(dwi(prev_tangent_map[0])), g(dwi(prev_tangent_map[1])));
     let c = DMat2::from_cols(g(dwo(ln.tangent_map[0])), g(dwo(ln.tangent_map[1])));
     let bpos = DMat2::from_cols(
         -g(dwi(lc.tangent_map[0]) + dwo(lc.tangent_map[0])),

@@ -66,13 +66,17 @@ mod texture;
 mod tracker;
 mod vertex;
 
-pub use camera::{first_vertex_jacobian, first_vertex_variance, PIXEL_SIGMA};
+pub use camera::{
+    first_vertex_jacobian, first_vertex_jacobian_with, first_vertex_variance, first_vertex_variance_with, PIXEL_SIGMA,
+};
 pub use constraint::{
     constraint_derivatives, constraint_derivatives_with, effective_eta, ggx_to_beckmann_alpha, half_vector_slope,
     half_vector_variance, half_vector_variance_aniso, ConstraintDerivatives, GGX_TO_BECKMANN,
 };
 pub use estimators::{pixel_spread_angle, PbrtDifferentials, RayCone};
-pub use texture::{lod, tangent_covariance, uv_covariance, world_covariance, VertexFootprint, LOD_MAX, LOD_MIN};
+pub use texture::{
+    lod, tangent_covariance, uv_covariance, uv_covariance_with, world_covariance, VertexFootprint, LOD_MAX, LOD_MIN,
+};
 pub use tracker::FootprintTracker;
 pub use vertex::{orthonormal_basis, LocalGeometry, Scatter, Vertex};
 

@@ -24,7 +24,12 @@ pub fn world_covariance(cov: DMat2, v: &Vertex) -> DMat3 {
 /// [`crate::LocalGeometry::uv_jacobian`] (a clamped inverse of `[t b]ᵀ [dpdu dpdv]`, see
 /// [`Vertex::local`]). Symmetric, positive semi-definite, eigenvalues at most `MAX_VARIANCE`.
 pub fn uv_covariance(cov: DMat2, v: &Vertex) -> DMat2 {
-    let j = v.uv_jacobian();
+    uv_covariance_with(cov, v.uv_jacobian())
+}
+
+/// [`uv_covariance`] with the vertex's uv Jacobian `j` already computed
+/// ([`crate::LocalGeometry::uv_jacobian`], which a tracker keeps for its current vertex).
+pub fn uv_covariance_with(cov: DMat2, j: DMat2) -> DMat2 {
     clamp_covariance(j * cov * j.transpose(), MAX_VARIANCE).cov
 }
 

@@ -2,7 +2,7 @@
 
 use glam::{DMat2, DVec2, DVec3};
 
-use crate::constraint::{constraint_derivatives_with, ConstraintDerivatives};
+use crate::constraint::{constraint_derivatives_from, ConstraintDerivatives};
 use crate::mat::clamp_covariance;
 use crate::vertex::{LocalGeometry, Scatter, Vertex};
 use crate::{C_CONDITION_LIMIT, MAX_VARIANCE, MIN_C_SINGULAR_VALUE};
@@ -37,35 +37,45 @@ pub struct FootprintTracker {
     var_p: DMat2,
     var_pp: DMat2,
     cov_p_pp: DMat2,
-    prev: Vertex,
+    /// Of the previous vertex `x_{i−1}`, what `A_i` reads: its position and its tangent map
+    /// ([`LocalGeometry::tangent_map`]). A path copies its tracker at every hit (the state at a
+    /// hit is kept aside until the path scatters there), and the whole previous vertex with its
+    /// local geometry was a third of the copy.
+    prev_p: DVec3,
+    prev_tangent_map: [DVec3; 2],
     cur: Vertex,
-    /// Local geometry of `prev` and `cur`, computed once when each vertex joined the path.
-    prev_local: LocalGeometry,
+    /// Local geometry of `cur`, computed once when it joined the path.
     cur_local: LocalGeometry,
 }
+
+/// The tangent map of [`Vertex::point`]'s local geometry (the camera's vertex).
+const POINT_TANGENT_MAP: [DVec3; 2] = [DVec3::X, DVec3::Y];
 
 impl FootprintTracker {
     /// Matrix mode: starts at `x₁` with footprint `var_x1` (e.g. [`crate::first_vertex_variance`]).
     pub fn start(var_x1: DMat2) -> Self {
         let p = Vertex::point(DVec3::ZERO);
-        Self::start_path_impl(p, p, var_x1)
+        Self::start_path_with(DVec3::ZERO, &p, &p.local(), var_x1)
     }
 
     /// Vertex mode: starts a path at the camera (`x₀`, a fixed point) whose first hit is
     /// `first` (`x₁`) with footprint `var_x1`.
     pub fn start_path(camera: DVec3, first: &Vertex, var_x1: DMat2) -> Self {
-        Self::start_path_impl(Vertex::point(camera), *first, var_x1)
+        Self::start_path_with(camera, first, &first.local(), var_x1)
     }
 
-    fn start_path_impl(prev: Vertex, cur: Vertex, var_x1: DMat2) -> Self {
+    /// [`start_path`](Self::start_path) with `first`'s [`LocalGeometry`] already computed.
+    pub fn start_path_with(camera: DVec3, first: &Vertex, local: &LocalGeometry, var_x1: DMat2) -> Self {
+        // The camera's vertex is `Vertex::point(camera)`, whose tangent map is its frame's
+        // (x, y): `A₁` meets only the zero variance and covariance of the fixed camera.
         FootprintTracker {
             var_p: clamp_covariance(var_x1, MAX_VARIANCE).cov,
             var_pp: DMat2::ZERO,
             cov_p_pp: DMat2::ZERO,
-            prev_local: prev.local(),
-            cur_local: cur.local(),
-            prev,
-            cur,
+            prev_p: camera,
+            prev_tangent_map: POINT_TANGENT_MAP,
+            cur: *first,
+            cur_local: *local,
         }
     }
 
@@ -106,9 +116,9 @@ impl FootprintTracker {
     /// `var(Δx_{i+1})` in `next`'s tangent frame.
     pub fn advance(&mut self, next: &Vertex, scatter: Scatter, var_h: DMat2) -> DMat2 {
         let next_local = next.local();
-        let d = constraint_derivatives_with(
-            &self.prev,
-            &self.prev_local,
+        let d = constraint_derivatives_from(
+            self.prev_p,
+            &self.prev_tangent_map,
             &self.cur,
             &self.cur_local,
             next,
@@ -116,8 +126,8 @@ impl FootprintTracker {
             scatter,
         );
         let v = self.step(&d, var_h);
-        self.prev = self.cur;
-        self.prev_local = self.cur_local;
+        self.prev_p = self.cur.p;
+        self.prev_tangent_map = self.cur_local.tangent_map;
         self.cur = *next;
         self.cur_local = next_local;
         v
@@ -149,5 +159,24 @@ impl FootprintTracker {
     /// The current vertex `x_i` (vertex mode; a point at the origin in matrix mode).
     pub fn current_vertex(&self) -> &Vertex {
         &self.cur
+    }
+
+    /// The current vertex's [`LocalGeometry`] (its uv Jacobian gives the texture footprint
+    /// there, [`crate::uv_covariance_with`]).
+    pub fn current_local(&self) -> &LocalGeometry {
+        &self.cur_local
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The camera's tangent map the tracker starts from is the one `Vertex::point` describes.
+    #[test]
+    fn camera_tangent_map_is_the_points() {
+        for c in [DVec3::ZERO, DVec3::new(3.0, -2.0, 7.5)] {
+            assert_eq!(Vertex::point(c).local().tangent_map, POINT_TANGENT_MAP);
+        }
     }
 }

@@ -10,7 +10,8 @@
 use crate::bsdf::{lobe_alpha, Bsdf, BsdfModel, BsdfSample, LobeKind};
 use crate::camera::{Camera, CameraRay};
 use footprint::{
-    first_vertex_variance, half_vector_variance, FootprintTracker, PbrtDifferentials, RayCone, Scatter, Vertex,
+    first_vertex_variance_with, half_vector_variance, FootprintTracker, LocalGeometry, PbrtDifferentials, RayCone,
+    Scatter, Vertex,
 };
 use glam::{DMat2, Vec3};
 use std::str::FromStr;
@@ -103,14 +104,22 @@ pub enum PathFootprint {
 }
 
 impl PathFootprint {
-    /// Starts at the first hit `x1` of camera ray `cam`; returns the state and `var(Δx₁)`.
-    pub fn start(mode: FootprintMode, camera: &Camera, cam: &CameraRay, x1: &Vertex, spp: u32) -> (Self, DMat2) {
+    /// Starts at the first hit `x1` (whose local geometry is `local`) of camera ray `cam`;
+    /// returns the state and `var(Δx₁)`.
+    pub fn start(
+        mode: FootprintMode,
+        camera: &Camera,
+        cam: &CameraRay,
+        x1: &Vertex,
+        local: &LocalGeometry,
+        spp: u32,
+    ) -> (Self, DMat2) {
         let o = cam.ray.o.as_dvec3();
         let d = cam.d_unnormalised.as_dvec3();
         match mode {
             FootprintMode::Covariance => {
-                let var = first_vertex_variance(o, d, cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), x1);
-                (PathFootprint::Covariance(FootprintTracker::start_path(o, x1, var)), var)
+                let var = first_vertex_variance_with(o, d, cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), x1, local);
+                (PathFootprint::Covariance(FootprintTracker::start_path_with(o, x1, local, var)), var)
             }
             FootprintMode::RayCone => {
                 let mut cone = RayCone::new(o, d, camera.pixel_spread_angle());
@@ -131,6 +140,14 @@ impl PathFootprint {
                 (PathFootprint::Pbrt(p), var)
             }
             FootprintMode::None => (PathFootprint::None, DMat2::ZERO),
+        }
+    }
+
+    /// The uv Jacobian at `v`, the vertex this state reached last (the tracker keeps it).
+    pub fn uv_jacobian(&self, v: &Vertex) -> DMat2 {
+        match self {
+            PathFootprint::Covariance(t) => t.current_local().uv_jacobian,
+            _ => v.uv_jacobian(),
         }
     }
 

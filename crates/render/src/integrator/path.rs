@@ -18,7 +18,7 @@ use crate::sampling::Rng;
 use crate::scene::Scene;
 use crate::shading::{GraphSource, TextureEvaluator};
 use crate::texture::ShadeContext;
-use footprint::Vertex;
+use footprint::{LocalGeometry, Vertex};
 use glam::{DMat2, DVec2, Mat2, Vec2, Vec3};
 
 /// Offsets a ray origin off the surface along the geometric normal, on the side of `d`.
@@ -94,7 +94,7 @@ struct CentreShift {
 /// for estimators other than the covariance tracker (the ray cone and pbrt-style differentials
 /// keep their published centring), when the centre's ray does not meet the plane in front of
 /// the camera, or for a non-finite result.
-fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) -> CentreShift {
+fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex, local: &LocalGeometry) -> CentreShift {
     if settings.footprint != FootprintMode::Covariance || cam.film_offset == Vec2::ZERO {
         return CentreShift::default();
     }
@@ -103,7 +103,6 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex) ->
     // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
     let o = cam.ray.o.as_dvec3();
     let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
-    let local = v.local();
     let g = local.geometric_normal;
     let (num, den) = ((v.p - o).dot(g), dc.dot(g));
     if !(num * den > 0.0) {
@@ -135,6 +134,8 @@ pub fn shares_pixel_textures(settings: &RenderSettings) -> bool {
 struct TextureFootprint {
     vertex: Option<Vertex>,
     var: DMat2,
+    /// The vertex's uv Jacobian ([`LocalGeometry::uv_jacobian`]; zero without a vertex).
+    uv_jacobian: DMat2,
     shift: CentreShift,
     pixel: bool,
 }
@@ -183,18 +184,24 @@ impl FootprintCarrier {
         }
         let v = si.footprint_vertex();
         let next = 1 - self.cur;
-        let (var, shift, pixel) = match &self.last {
+        let (var, uv_jacobian, shift, pixel) = match &self.last {
             None => {
-                let (state, var) = PathFootprint::start(settings.footprint, &scene.camera, cam, &v, settings.spp);
+                // The first hit's local geometry serves the tracker's start, the recentring and
+                // the texture footprint: computed once (it was four times).
+                let local = v.local();
+                let (state, var) =
+                    PathFootprint::start(settings.footprint, &scene.camera, cam, &v, &local, settings.spp);
                 self.states[next] = state;
-                (var, first_vertex_shift(settings, cam, &v), shares_pixel_textures(settings))
+                let shift = first_vertex_shift(settings, cam, &v, &local);
+                (var, local.uv_jacobian, shift, shares_pixel_textures(settings))
             }
             Some((pv, bs)) => {
                 self.states[next] = self.states[self.cur];
-                (self.states[next].advance(pv, bs, d, &v), CentreShift::default(), false)
+                let var = self.states[next].advance(pv, bs, d, &v);
+                (var, self.states[next].uv_jacobian(&v), CentreShift::default(), false)
             }
         };
-        TextureFootprint { vertex: Some(v), var, shift, pixel }
+        TextureFootprint { vertex: Some(v), var, uv_jacobian, shift, pixel }
     }
 
     /// The path scatters at the hit it arrived at last: it keeps the footprint there.
@@ -249,8 +256,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
             &material.constant_outputs
         } else {
             let fp = match &tf.vertex {
-                Some(v) => {
-                    let mut fp = self.graph_footprint(si, v, tf.var);
+                Some(_) => {
+                    let mut fp = self.graph_footprint(si, tf.uv_jacobian, tf.var);
                     fp.uv += tf.shift.uv;
                     fp.geom.p += tf.shift.p;
                     fp
@@ -294,15 +301,20 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         let hit = scene.accel.intersect_shape(&scene.shapes, &cam.ray, shape)?;
         let si = interaction(&scene.shapes, &cam.ray, &hit);
         let v = si.footprint_vertex();
-        let (_, var) = PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, self.settings.spp);
-        let fp = self.graph_footprint(&si, &v, var);
+        let local = v.local();
+        let (_, var) =
+            PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, &local, self.settings.spp);
+        let fp = self.graph_footprint(&si, local.uv_jacobian, var);
         (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
     }
 
-    /// The footprint graphs are evaluated over at hit `si` (vertex `v`) whose tangent-plane
-    /// covariance is `var`, scaled by the texture filter, centred on the hit.
-    fn graph_footprint(&self, si: &SurfaceInteraction, v: &Vertex, var: DMat2) -> graph::Footprint {
-        si.graph_footprint(footprint::uv_covariance(var, v).as_mat2() * self.settings.filter_scale_squared())
+    /// The footprint graphs are evaluated over at hit `si` (whose vertex has uv Jacobian
+    /// `uv_jacobian`) whose tangent-plane covariance is `var`, scaled by the texture filter,
+    /// centred on the hit.
+    fn graph_footprint(&self, si: &SurfaceInteraction, uv_jacobian: DMat2, var: DMat2) -> graph::Footprint {
+        si.graph_footprint(
+            footprint::uv_covariance_with(var, uv_jacobian).as_mat2() * self.settings.filter_scale_squared(),
+        )
     }
 
     /// What a shadow ray lets through: 0 when an opaque surface blocks it, otherwise the
@@ -331,7 +343,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                     let v = si.footprint_vertex();
                     let mut state = *fp;
                     let var = state.advance(cur, bs, shadow.d, &v);
-                    TextureFootprint { vertex: Some(v), var, shift: CentreShift::default(), pixel: false }
+                    let uv_jacobian = state.uv_jacobian(&v);
+                    TextureFootprint { vertex: Some(v), var, uv_jacobian, shift: CentreShift::default(), pixel: false }
                 }
                 _ => TextureFootprint::default(),
             };
