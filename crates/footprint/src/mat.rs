@@ -129,6 +129,20 @@ pub fn singular_values(m: DMat2) -> (f64, f64) {
     (q + r, q - r)
 }
 
+/// Whether `m`'s smallest singular value is certainly at least `ratio` times its largest and at
+/// least `min_abs`, decided without square roots: `|det m| = σ₁ |σ₂|` and
+/// `‖m‖²_F = σ₁² + σ₂² ≥ σ₁²`, so `|det| ≥ 2 ratio ‖m‖²_F` gives `|σ₂| ≥ 2 ratio σ₁` and
+/// `det² ≥ 4 min_abs² ‖m‖²_F` gives `|σ₂| ≥ 2 min_abs` (the factors of 2 cover rounding). Where
+/// it holds, the regularised inverses below are the plain inverse; where it does not, they
+/// decide with the singular values themselves.
+#[inline]
+pub fn certainly_conditioned(m: DMat2, ratio: f64, min_abs: f64) -> bool {
+    let det = m.determinant();
+    let f = m.x_axis.length_squared() + m.y_axis.length_squared();
+    let a = det.abs();
+    det != 0.0 && f.is_finite() && a >= 2.0 * ratio * f && a * a >= 4.0 * min_abs * min_abs * f
+}
+
 /// [`Svd2::clamped_inverse`] of `m`, taking the plain inverse when no singular value is below
 /// `floor` (the common case: no trigonometry) and the decomposition otherwise.
 #[inline]
@@ -251,6 +265,41 @@ mod tests {
                 assert!(close(pseudo_inverse(m, floor), svd.pseudo_inverse(floor)));
             }
         }
+    }
+
+    /// Where `certainly_conditioned` holds, the decomposition agrees: the smallest singular value
+    /// is at least the ratio times the largest and at least the absolute floor (so the
+    /// regularised inverses are the plain one). Matrices from well to badly conditioned.
+    #[test]
+    fn certainly_conditioned_never_claims_a_badly_conditioned_matrix() {
+        let mut st = 5u64;
+        let (mut claimed, mut total) = (0, 0);
+        for k in 0..20_000 {
+            let mut m =
+                DMat2::from_cols(DVec2::new(lcg(&mut st), lcg(&mut st)), DVec2::new(lcg(&mut st), lcg(&mut st)));
+            // Second column near a multiple of the first, at spreads from 1 down to 1e-15.
+            let spread = 10f64.powi(-(k % 16));
+            m.y_axis = m.x_axis * lcg(&mut st) + m.y_axis * spread;
+            let scale = 10f64.powi((k % 7) as i32 * 4 - 12);
+            let m = m * scale;
+            for (ratio, min_abs) in [(1e-6, 0.0), (1e-4, 1e-12), (0.3, 0.0)] {
+                let svd = Svd2::new(m);
+                let (lo, hi) = (svd.min_singular(), svd.max_singular());
+                if certainly_conditioned(m, ratio, min_abs) {
+                    claimed += 1;
+                    assert!(lo >= ratio * hi, "{m} {ratio}");
+                    assert!(lo >= min_abs, "{m} {min_abs}");
+                } else {
+                    // And it misses only matrices within a small factor of either bound
+                    // (`‖m‖²_F ≤ 2σ₁²`): the fast path is taken where it matters.
+                    assert!(lo < 4.1 * ratio * hi || lo < 2.9 * min_abs, "{m} {ratio} {min_abs}");
+                }
+                total += 1;
+            }
+        }
+        assert!(claimed > 0 && claimed < total, "{claimed} of {total}");
+        assert!(!certainly_conditioned(DMat2::ZERO, 1e-6, 0.0));
+        assert!(!certainly_conditioned(DMat2::from_cols(DVec2::NAN, DVec2::Y), 1e-6, 0.0));
     }
 
     #[test]

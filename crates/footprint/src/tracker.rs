@@ -89,9 +89,13 @@ impl FootprintTracker {
         }
         let var_h = clamp_covariance(var_h, MAX_VARIANCE).cov;
         let (a, b) = (d.a, d.b);
-        let (c_max, _) = crate::mat::singular_values(d.c);
-        let floor = (C_CONDITION_LIMIT * c_max).max(MIN_C_SINGULAR_VALUE);
-        let c_inv = crate::mat::clamped_inverse(d.c, floor);
+        let c_inv = if crate::mat::certainly_conditioned(d.c, C_CONDITION_LIMIT, MIN_C_SINGULAR_VALUE) {
+            d.c.inverse()
+        } else {
+            let (c_max, _) = crate::mat::singular_values(d.c);
+            let floor = (C_CONDITION_LIMIT * c_max).max(MIN_C_SINGULAR_VALUE);
+            crate::mat::clamped_inverse(d.c, floor)
+        };
 
         // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i.
         let cross = b * self.cov_p_pp * a.transpose();

@@ -81,14 +81,13 @@ impl Vertex {
     pub fn local(&self) -> LocalGeometry {
         let (t, b, n) = (self.t, self.b, self.n);
         let m = self.uv_map();
-        // One decomposition serves both inverses.
-        let sv = crate::mat::singular_values(m);
-        let smax = sv.0;
-        let (j_geo, j_uv) = if smax > 0.0 && smax.is_finite() {
-            let floor = UV_CONDITION_LIMIT * smax;
-            (crate::mat::pseudo_inverse_sv(m, sv, floor), crate::mat::clamped_inverse_sv(m, sv, floor))
+        // One decomposition serves both inverses, and none is needed where the map is clearly
+        // well conditioned (both are then its inverse).
+        let (j_geo, j_uv) = if crate::mat::certainly_conditioned(m, UV_CONDITION_LIMIT, 0.0) {
+            let inv = m.inverse();
+            (inv, inv)
         } else {
-            (DMat2::ZERO, DMat2::ZERO)
+            Self::regularised_inverses(m)
         };
         // Offsets along n of the true surface per tangent-plane offset.
         let ndp = DVec2::new(n.dot(self.dpdu), n.dot(self.dpdv));
@@ -114,6 +113,18 @@ impl Vertex {
         LocalGeometry { tangent_map: [p0, p1], shape, uv_jacobian: j_uv, geometric_normal }
     }
 
+    /// The pseudo-inverse and the clamped inverse of the uv map `m` (see [`Vertex::local`]).
+    fn regularised_inverses(m: DMat2) -> (DMat2, DMat2) {
+        let sv = crate::mat::singular_values(m);
+        let smax = sv.0;
+        if smax > 0.0 && smax.is_finite() {
+            let floor = UV_CONDITION_LIMIT * smax;
+            (crate::mat::pseudo_inverse_sv(m, sv, floor), crate::mat::clamped_inverse_sv(m, sv, floor))
+        } else {
+            (DMat2::ZERO, DMat2::ZERO)
+        }
+    }
+
     /// `M = [t b]ᵀ [dpdu dpdv]`: the tangent-plane offset per uv offset.
     #[inline]
     fn uv_map(&self) -> DMat2 {
@@ -125,6 +136,9 @@ impl Vertex {
     /// geometry (the texture footprint needs only it).
     pub fn uv_jacobian(&self) -> DMat2 {
         let m = self.uv_map();
+        if crate::mat::certainly_conditioned(m, UV_CONDITION_LIMIT, 0.0) {
+            return m.inverse();
+        }
         let sv = crate::mat::singular_values(m);
         if sv.0 > 0.0 && sv.0.is_finite() {
             crate::mat::clamped_inverse_sv(m, sv, UV_CONDITION_LIMIT * sv.0)
