@@ -87,7 +87,14 @@ impl FootprintTracker {
         if !d.is_finite() || !var_h.is_finite() {
             return self.lose();
         }
-        let var_h = clamp_covariance(var_h, MAX_VARIANCE).cov;
+        // An isotropic var(Δh) within bounds (every roughness the renderer passes) is its own
+        // clamp: taken as it is, without the eigenvalue test.
+        let isotropic = var_h.x_axis.y == 0.0 && var_h.y_axis.x == 0.0 && var_h.x_axis.x == var_h.y_axis.y;
+        let var_h = if isotropic && (0.0..=MAX_VARIANCE).contains(&var_h.x_axis.x) {
+            var_h
+        } else {
+            clamp_covariance(var_h, MAX_VARIANCE).cov
+        };
         let (a, b) = (d.a, d.b);
         let c_inv = if crate::mat::certainly_conditioned(d.c, C_CONDITION_LIMIT, MIN_C_SINGULAR_VALUE) {
             d.c.inverse()
@@ -175,6 +182,23 @@ impl FootprintTracker {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An isotropic var(Δh) within bounds is what the clamp would give, bit for bit (the
+    /// tracker skips the clamp for it), at every roughness `half_vector_variance` makes.
+    #[test]
+    fn isotropic_roughness_is_its_own_clamp() {
+        for k in 0..=2000 {
+            let alpha = k as f64 / 1000.0;
+            let v = crate::half_vector_variance(alpha);
+            let c = clamp_covariance(v, MAX_VARIANCE);
+            assert!(!c.clamped_above);
+            assert_eq!(c.cov.to_cols_array().map(f64::to_bits), v.to_cols_array().map(f64::to_bits), "α {alpha}");
+        }
+        for x in [0.0, 1e-300, 1e-12, 0.3, 1e15, MAX_VARIANCE] {
+            let v = DMat2::from_diagonal(DVec2::splat(x));
+            assert_eq!(clamp_covariance(v, MAX_VARIANCE).cov, v);
+        }
+    }
 
     /// The camera's tangent map the tracker starts from is the one `Vertex::point` describes.
     #[test]
