@@ -41,23 +41,30 @@ pub fn first_vertex_jacobian(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    first_vertex_jacobian_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, &hit.local())
+    first_vertex_jacobian_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, &hit.local())
+}
+
+/// A camera ray and its direction's derivatives per pixel, as [`first_vertex_jacobian`] reads
+/// them (same conventions).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelRay {
+    /// The camera's position.
+    pub origin: DVec3,
+    /// The ray's direction.
+    pub dir: DVec3,
+    /// `∂dir/∂(pixel x)`.
+    pub d_dir_dpx: DVec3,
+    /// `∂dir/∂(pixel y)`.
+    pub d_dir_dpy: DVec3,
 }
 
 /// [`first_vertex_jacobian`] with `hit`'s [`LocalGeometry`] already computed (a path computes it
 /// once per vertex: the tracker, the texture footprint and the recentring all read it).
-pub fn first_vertex_jacobian_with(
-    camera_origin: DVec3,
-    dir: DVec3,
-    d_dir_dpx: DVec3,
-    d_dir_dpy: DVec3,
-    hit: &Vertex,
-    local: &LocalGeometry,
-) -> DMat2 {
-    let g = local.geometric_normal;
-    let s = (hit.p - camera_origin).dot(dir) / dir.length_squared();
-    let dpx = transfer(DVec3::ZERO, dir, d_dir_dpx, s, g);
-    let dpy = transfer(DVec3::ZERO, dir, d_dir_dpy, s, g);
+pub fn first_vertex_jacobian_with(ray: &PixelRay, hit: &Vertex, local: &LocalGeometry) -> DMat2 {
+    let (dir, g) = (ray.dir, local.geometric_normal);
+    let s = (hit.p - ray.origin).dot(dir) / dir.length_squared();
+    let dpx = transfer(DVec3::ZERO, dir, ray.d_dir_dpx, s, g);
+    let dpy = transfer(DVec3::ZERO, dir, ray.d_dir_dpy, s, g);
     let j = DMat2::from_cols(DVec2::new(hit.t.dot(dpx), hit.b.dot(dpx)), DVec2::new(hit.t.dot(dpy), hit.b.dot(dpy)));
     if j.is_finite() {
         j
@@ -75,19 +82,12 @@ pub fn first_vertex_variance(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    first_vertex_variance_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, &hit.local())
+    first_vertex_variance_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, &hit.local())
 }
 
 /// [`first_vertex_variance`] with `hit`'s [`LocalGeometry`] already computed.
-pub fn first_vertex_variance_with(
-    camera_origin: DVec3,
-    dir: DVec3,
-    d_dir_dpx: DVec3,
-    d_dir_dpy: DVec3,
-    hit: &Vertex,
-    local: &LocalGeometry,
-) -> DMat2 {
-    let j = first_vertex_jacobian_with(camera_origin, dir, d_dir_dpx, d_dir_dpy, hit, local);
+pub fn first_vertex_variance_with(ray: &PixelRay, hit: &Vertex, local: &LocalGeometry) -> DMat2 {
+    let j = first_vertex_jacobian_with(ray, hit, local);
     let v = j * j.transpose() * (PIXEL_SIGMA * PIXEL_SIGMA);
     clamp_covariance(v, MAX_VARIANCE).cov
 }

@@ -67,7 +67,8 @@ mod tracker;
 mod vertex;
 
 pub use camera::{
-    first_vertex_jacobian, first_vertex_jacobian_with, first_vertex_variance, first_vertex_variance_with, PIXEL_SIGMA,
+    first_vertex_jacobian, first_vertex_jacobian_with, first_vertex_variance, first_vertex_variance_with, PixelRay,
+    PIXEL_SIGMA,
 };
 pub use constraint::{
     constraint_derivatives, constraint_derivatives_with, effective_eta, ggx_to_beckmann_alpha, half_vector_slope,

@@ -10,8 +10,8 @@
 use crate::bsdf::{lobe_alpha, Bsdf, BsdfModel, BsdfSample, LobeKind};
 use crate::camera::{Camera, CameraRay};
 use footprint::{
-    first_vertex_variance_with, half_vector_variance, FootprintTracker, LocalGeometry, PbrtDifferentials, RayCone,
-    Scatter, Vertex,
+    first_vertex_variance_with, half_vector_variance, FootprintTracker, LocalGeometry, PbrtDifferentials, PixelRay,
+    RayCone, Scatter, Vertex,
 };
 use glam::{DMat2, Vec3};
 use std::str::FromStr;
@@ -118,7 +118,9 @@ impl PathFootprint {
         let d = cam.d_unnormalised.as_dvec3();
         match mode {
             FootprintMode::Covariance => {
-                let var = first_vertex_variance_with(o, d, cam.dd_dx.as_dvec3(), cam.dd_dy.as_dvec3(), x1, local);
+                let ray =
+                    PixelRay { origin: o, dir: d, d_dir_dpx: cam.dd_dx.as_dvec3(), d_dir_dpy: cam.dd_dy.as_dvec3() };
+                let var = first_vertex_variance_with(&ray, x1, local);
                 (PathFootprint::Covariance(FootprintTracker::start_path_with(o, x1, local, var)), var)
             }
             FootprintMode::RayCone => {
