@@ -31,12 +31,43 @@ pub fn mix64(mut z: u64) -> u64 {
 /// grid, and smooth integrands (filtered textures, soft lighting) converge much faster than
 /// with independent points. Depends only on `seed`, `pixel` and `sample`.
 pub fn pixel_sample(seed: u64, pixel: u64, sample: u64) -> Vec2 {
-    // 1/g and 1/g² for the plastic number g, the real root of x³ = x + 1.
-    const A: [f64; 2] = [0.754_877_666_246_692_8, 0.569_840_290_998_053_3];
-    let mut rng = Rng::for_sample(seed, pixel, u64::MAX);
-    let shift = [rng.next_f32() as f64, rng.next_f32() as f64];
-    let at = |k: usize| ((shift[k] + sample as f64 * A[k]).fract() as f32).min(ONE_MINUS_EPSILON);
-    Vec2::new(at(0), at(1))
+    PixelSequence::new(seed, pixel).at(sample)
+}
+
+/// A pixel's [`pixel_sample`] sequence: its random shift, drawn once for all its samples (a
+/// stream set up per camera sample was a third of generating a camera ray).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelSequence {
+    shift: [f64; 2],
+}
+
+impl PixelSequence {
+    /// The sequence of pixel `pixel` in a render seeded by `seed`.
+    pub fn new(seed: u64, pixel: u64) -> PixelSequence {
+        let mut rng = Rng::for_sample(seed, pixel, u64::MAX);
+        PixelSequence { shift: [rng.next_f32() as f64, rng.next_f32() as f64] }
+    }
+
+    /// Point `sample` of the sequence.
+    #[inline]
+    pub fn at(&self, sample: u64) -> Vec2 {
+        // 1/g and 1/g² for the plastic number g, the real root of x³ = x + 1.
+        const A: [f64; 2] = [0.754_877_666_246_692_8, 0.569_840_290_998_053_3];
+        let at = |k: usize| (fract_nonnegative(self.shift[k] + sample as f64 * A[k]) as f32).min(ONE_MINUS_EPSILON);
+        Vec2::new(at(0), at(1))
+    }
+}
+
+/// `x.fract()` for `0 < x < 2⁶³` without libm's `trunc` (the baseline x86-64 target has no
+/// rounding instruction): the conversion truncates, exactly, toward zero. Others (zeros of
+/// either sign among them) go to `fract`.
+#[inline]
+fn fract_nonnegative(x: f64) -> f64 {
+    if x > 0.0 && x < 9.2e18 {
+        x - (x as u64) as f64
+    } else {
+        x.fract()
+    }
 }
 
 /// The largest `f32` below 1.
@@ -213,6 +244,37 @@ mod tests {
         let c: Vec<u32> = (0..4).map(|_| 0).scan(Rng::for_sample(1, 2, 4), |r, _| Some(r.next_u32())).collect();
         assert_eq!(a, b);
         assert_ne!(a, c);
+    }
+
+    /// The fraction without libm is `fract`, bit for bit, on the additive sequence's arguments
+    /// (shifts in [0, 1) plus up to 2³² steps) and on edge values.
+    #[test]
+    fn fract_without_libm_is_fract() {
+        let mut r = Rng::new(11, 3);
+        for k in 0..200_000u64 {
+            let x = r.next_f32() as f64 + (k * 21_474) as f64 * 0.754_877_666_246_692_8;
+            assert_eq!(fract_nonnegative(x).to_bits(), x.fract().to_bits(), "{x}");
+        }
+        for x in [0.0, -0.0, 1.0, 0.5, 4_503_599_627_370_495.5, 9.1e18, 9.3e18, f64::INFINITY, f64::NAN, -2.5] {
+            assert_eq!(fract_nonnegative(x).to_bits(), x.fract().to_bits(), "{x}");
+        }
+    }
+
+    /// A pixel's sequence set up once gives every sample the point of the R2 recurrence shifted
+    /// by the pixel's own stream, written out here with libm's `fract`.
+    #[test]
+    fn pixel_sequence_is_the_shifted_recurrence() {
+        const A: [f64; 2] = [0.754_877_666_246_692_8, 0.569_840_290_998_053_3];
+        for (seed, pixel) in [(0, 0), (7, 12_345), (u64::MAX, 99)] {
+            let seq = PixelSequence::new(seed, pixel);
+            let mut rng = Rng::for_sample(seed, pixel, u64::MAX);
+            let shift = [rng.next_f32() as f64, rng.next_f32() as f64];
+            for s in [0, 1, 2, 15, 1000, u64::from(u32::MAX)] {
+                let at = |k: usize| ((shift[k] + s as f64 * A[k]).fract() as f32).min(ONE_MINUS_EPSILON);
+                assert_eq!(seq.at(s), Vec2::new(at(0), at(1)));
+                assert_eq!(pixel_sample(seed, pixel, s), seq.at(s));
+            }
+        }
     }
 
     #[test]

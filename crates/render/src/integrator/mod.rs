@@ -18,7 +18,7 @@ use crate::film::{Image, PixelSum};
 use crate::geometry::SurfaceInteraction;
 use crate::math::Spectrum;
 use crate::pathfootprint::FootprintMode;
-use crate::sampling::Rng;
+use crate::sampling::{PixelSequence, Rng};
 use crate::scene::Scene;
 use crate::shading::{Direct, GraphSource, NonFiniteSample, TextureEvaluator, NONFINITE_KEPT};
 use footprint::Vertex;
@@ -460,7 +460,13 @@ fn render_pixel_aov<S: GraphSource>(
 /// point (render, profiling, `tessera footprint`) takes its samples from here, so they agree.
 pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
     let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
-    let offset = scene.rfilter.warp(crate::sampling::pixel_sample(seed, pixel_index, u64::from(s)));
+    camera_sample_in(scene, &PixelSequence::new(seed, pixel_index), seed, x, y, s)
+}
+
+/// [`camera_sample`] with the pixel's sample sequence already set up (once per pixel).
+fn camera_sample_in(scene: &Scene, seq: &PixelSequence, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
+    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
+    let offset = scene.rfilter.warp(seq.at(u64::from(s)));
     let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
     let mut cam = scene.camera.generate_ray(film);
     cam.film_offset = offset;
@@ -484,8 +490,9 @@ pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
 ) -> PixelSum {
     let mut sum = PixelSum::default();
     textures.begin_pixel(x, y);
+    let seq = PixelSequence::new(settings.seed, u64::from(y) * u64::from(scene.camera.width) + u64::from(x));
     for s in samples {
-        let (cam, mut rng) = camera_sample(scene, settings.seed, x, y, s);
+        let (cam, mut rng) = camera_sample_in(scene, &seq, settings.seed, x, y, s);
         textures.begin_sample(s);
         let l = radiance(scene, settings, &cam, &mut rng, counts, textures, obs);
         counts.samples += 1;
