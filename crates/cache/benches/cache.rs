@@ -2,7 +2,7 @@
 //! `eviction/*`, `in_flight/*`) or per texel filled (`fill/*`), so criterion's `thrpt` (or
 //! `time / elements`) reads directly as the cost the report quotes.
 //!
-//! - `hit/{trilinear,anisotropic}/{coherent,random}/{micro8,micro4,micro0,nocount}`: lookups on a warm
+//! - `hit/{trilinear,anisotropic}/{coherent,random}/{micro64,micro4,micro0,nocount}`: lookups on a warm
 //!   cache (every tile resident). `coherent`: a scanline walk (neighbouring lookups share
 //!   tiles); `random`: uniform uv over 64×64 level-0 tiles (the micro-cache rarely helps).
 //! - `fill/*`: lookups that each fill one new tile with a trivial fill function, per texel:
@@ -97,7 +97,7 @@ fn hits(crit: &mut Criterion) {
             let q = hit_queries(coherent, filter);
             g.throughput(Throughput::Elements(q.len() as u64));
             for (variant, micro_cache, count_requests) in
-                [("micro8", 8, true), ("micro4", 4, true), ("micro0", 0, true), ("nocount", 4, false)]
+                [("micro64", 64, true), ("micro4", 4, true), ("micro0", 0, true), ("nocount", 64, false)]
             {
                 let config = CacheConfig { micro_cache, count_requests, ..CacheConfig::with_budget(1 << 30) };
                 let (c, id) = cache(config, TexelFormat::F32);

@@ -104,14 +104,21 @@ struct MicroEntry {
     tile: Arc<Tile>,
 }
 
-/// A thread's last tiles (round-robin replacement), shared by all caches on the thread.
+/// A thread's recent tiles, shared by all caches on the thread: direct-mapped (a tile has one
+/// slot, [`micro_slot`], and replaces whatever held it).
 struct Micro {
     slots: [Option<MicroEntry>; MICRO_CACHE_MAX],
-    next: usize,
 }
 
 thread_local! {
-    static MICRO: RefCell<Micro> = const { RefCell::new(Micro { slots: [const { None }; MICRO_CACHE_MAX], next: 0 }) };
+    static MICRO: RefCell<Micro> = const { RefCell::new(Micro { slots: [const { None }; MICRO_CACHE_MAX] }) };
+}
+
+/// The micro-cache slot, among `n`, of tile `key` of cache `cache`.
+#[inline]
+fn micro_slot(cache: u64, key: &Key, n: usize) -> usize {
+    let h = key.hash64() ^ cache.wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    (((h >> 32) * n as u64) >> 32) as usize
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -310,6 +317,26 @@ impl TileCache {
     where
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
+        let level = level_for(cov_uv, self.textures[tex.0 as usize].desc.texels_per_uv);
+        self.lookup_with_level(tex, uv, cov_uv, level, filter, fill)
+    }
+
+    /// [`TileCache::lookup`] whose caller already computed `level`, which must be
+    /// [`level_for`]`(cov_uv, texels_per_uv)` of the texture's description: a caller that
+    /// compares the level with a threshold first (two logarithms and a square root) need not
+    /// have it computed twice.
+    pub fn lookup_with_level<F>(
+        &self,
+        tex: TextureId,
+        uv: Vec2,
+        cov_uv: Mat2,
+        level: f32,
+        filter: Filter,
+        fill: &F,
+    ) -> [f32; 3]
+    where
+        F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
+    {
         let t = &self.textures[tex.0 as usize];
         if self.config.count_requests {
             t.counters.count_lookup();
@@ -319,7 +346,8 @@ impl TileCache {
         let d0 = t.desc.texels_per_uv;
         match filter.kind {
             FilterKind::Trilinear => {
-                let lod = level_for(cov_uv, d0).clamp(f32::from(lo), f32::from(hi));
+                debug_assert_eq!(level.to_bits(), level_for(cov_uv, d0).to_bits());
+                let lod = level.clamp(f32::from(lo), f32::from(hi));
                 filter::trilinear(lod, hi, |l| self.bilinear(t, tex, l, uv, fill))
             }
             FilterKind::Anisotropic { max_anisotropy } => {
@@ -561,9 +589,12 @@ impl TileCache {
         MICRO
             .try_with(|m| {
                 let mut m = m.try_borrow_mut().ok()?;
-                let i =
-                    m.slots[..n].iter().position(|e| matches!(e, Some(e) if e.cache == self.id && e.key == *key))?;
-                let tile = &m.slots[i].as_ref()?.tile;
+                let i = micro_slot(self.id, key, n);
+                let e = m.slots[i].as_ref()?;
+                if !(e.cache == self.id && e.key == *key) {
+                    return None;
+                }
+                let tile = &e.tile;
                 if tile.evicted.load(Relaxed) {
                     m.slots[i] = None; // let its bytes go back to the budget
                     return None;
@@ -575,7 +606,7 @@ impl TileCache {
             .flatten()
     }
 
-    /// Puts a tile into this thread's micro-cache (round robin).
+    /// Puts a tile into its slot of this thread's micro-cache.
     #[inline]
     fn micro_put(&self, key: Key, tile: Arc<Tile>) {
         let n = self.config.micro_cache;
@@ -584,9 +615,8 @@ impl TileCache {
         }
         let _ = MICRO.try_with(|m| {
             if let Ok(mut m) = m.try_borrow_mut() {
-                let i = m.next % n;
+                let i = micro_slot(self.id, &key, n);
                 m.slots[i] = Some(MicroEntry { cache: self.id, key, tile });
-                m.next = (i + 1) % n;
             }
         });
     }
@@ -645,7 +675,11 @@ mod tests {
         assert_eq!(TileCache::new(CacheConfig { tile_size: 1, ..ok }).unwrap_err(), CacheError::TileSize(1));
         assert_eq!(TileCache::new(CacheConfig { tile_size: 24, ..ok }).unwrap_err(), CacheError::TileSize(24));
         assert_eq!(TileCache::new(CacheConfig { tile_size: 2048, ..ok }).unwrap_err(), CacheError::TileSize(2048));
-        assert_eq!(TileCache::new(CacheConfig { micro_cache: 9, ..ok }).unwrap_err(), CacheError::MicroCache(9));
+        let too_many = MICRO_CACHE_MAX + 1;
+        assert_eq!(
+            TileCache::new(CacheConfig { micro_cache: too_many, ..ok }).unwrap_err(),
+            CacheError::MicroCache(too_many)
+        );
         let mut c = TileCache::new(ok).unwrap();
         let d = desc(3, TexelFormat::F32);
         assert_eq!(c.add_texture(TextureDesc { channels: 4, ..d }).unwrap_err(), CacheError::Channels(4));
@@ -827,6 +861,32 @@ mod tests {
     }
 
     /// Evicted tiles still read by a thread keep counting until that thread lets them go.
+    /// The micro-cache's slots spread a render's working set: the tiles of three textures'
+    /// coarse levels (8 × 8, 4 × 4 and 2 × 2 tiles each) land in about as many distinct slots of
+    /// 256 as keys thrown at random would (135 expected for 252 keys), and always in range.
+    #[test]
+    fn micro_slots_spread_tiles() {
+        let mut used = std::collections::HashSet::new();
+        let mut keys = 0;
+        for tex in 0..3u32 {
+            for (level, side) in [(8u8, 8i32), (9, 4), (10, 2)] {
+                for x in 0..side {
+                    for y in 0..side {
+                        let slot = micro_slot(7, &Key { tex, level, x, y }, 256);
+                        assert!(slot < 256);
+                        used.insert(slot);
+                        keys += 1;
+                    }
+                }
+            }
+        }
+        let expected = 256.0 * (1.0 - (-(keys as f64) / 256.0).exp());
+        assert!(used.len() as f64 > 0.85 * expected, "{} slots for {keys} keys", used.len());
+        // Another cache's tiles take other slots.
+        let k = Key { tex: 0, level: 8, x: 1, y: 2 };
+        assert!((0..8u64).map(|c| micro_slot(c, &k, 256)).collect::<std::collections::HashSet<_>>().len() > 4);
+    }
+
     #[test]
     fn micro_cache_releases_evicted_tiles() {
         let (c, id) = cache(1, 4);

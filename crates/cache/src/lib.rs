@@ -62,7 +62,7 @@ pub const MAX_LEVEL: u8 = 31;
 /// Largest `max_anisotropy` an anisotropic [`Filter`] honours.
 pub const MAX_ANISOTROPY: f32 = 16.0;
 /// Most entries of the per-thread micro-cache ([`CacheConfig::micro_cache`]).
-pub const MICRO_CACHE_MAX: usize = 8;
+pub const MICRO_CACHE_MAX: usize = 256;
 /// Tile side `T` used by [`CacheConfig::default`], chosen by the `tile_size` benchmark: on its
 /// render-like trace (3 MiB budget, ~100 ns fill) T = 8, 16, 32, 64 took 1.26, 1.05, 1.02 and
 /// 1.17 µs per lookup and filled 8.1, 7.1, 7.6 and 9.4 texels per lookup; 16 fills the fewest
@@ -151,13 +151,15 @@ pub struct CacheConfig {
     pub in_flight: InFlight,
     /// Eviction policy.
     pub eviction: Eviction,
-    /// Tiles each thread keeps its own strong reference to (0 to [`MICRO_CACHE_MAX`]), so a hit
-    /// on one of them takes no lock and no shared write. These tiles stay alive (and counted in
-    /// the budget) until the thread replaces them, even after eviction or after the cache is
-    /// dropped, so a budget should be well above `threads × micro_cache × tile bytes`; below
-    /// that, lookups fall back to direct evaluation. Default 4: on the `hit` benchmark it cut
-    /// coherent hits from 120 to 81 ns (trilinear) and 433 to 292 ns (anisotropic), and costs
-    /// ~25 ns on scattered trilinear hits; 8 entries gained nothing.
+    /// Tiles each thread keeps its own strong reference to (0 to [`MICRO_CACHE_MAX`]; each tile
+    /// has one slot of them, by its hash), so a hit on one of them takes no lock and no shared
+    /// write. These tiles stay alive (and counted in the budget) until the thread replaces them,
+    /// even after eviction or after the cache is dropped, so a budget should be well above
+    /// `threads × micro_cache × tile bytes`; below that, lookups fall back to direct
+    /// evaluation. Default 64: a render's lookups at secondary bounces scatter over the few dozen
+    /// coarse tiles of each cached node, which four round-robin entries (the earlier default)
+    /// missed, sending two lookups in three to the shared map; 64 slots are about 150 KiB of
+    /// tiles per thread.
     pub micro_cache: usize,
     /// Count lookups and tile requests on the hit path (per-thread striped counters). Off, hits
     /// and requests read 0 in [`CacheStats`]; miss-side counters are always kept.
@@ -166,14 +168,14 @@ pub struct CacheConfig {
 
 impl Default for CacheConfig {
     /// Tile size [`DEFAULT_TILE_SIZE`], a 256 MiB budget, [`InFlight::Evaluate`],
-    /// [`Eviction::Clock`], a 4-tile micro-cache, request counting on.
+    /// [`Eviction::Clock`], a 64-tile micro-cache, request counting on.
     fn default() -> Self {
         CacheConfig {
             tile_size: DEFAULT_TILE_SIZE,
             budget_bytes: 256 << 20,
             in_flight: InFlight::Evaluate,
             eviction: Eviction::Clock,
-            micro_cache: 4,
+            micro_cache: 64,
             count_requests: true,
         }
     }

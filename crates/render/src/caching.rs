@@ -17,7 +17,7 @@ use crate::scene::Scene;
 use crate::shading::{Direct, GraphSource};
 use cache::{CacheConfig, CacheStats, Filter, TexelFormat, TextureDesc, TextureId, TileCache};
 use graph::{EvalScratch, EvalStats, Filtered, Footprint, Graph, Moments, NodeId, NodeOverride, Source, ValueType};
-use std::cell::RefCell;
+use std::cell::{Cell, RefCell};
 use std::str::FromStr;
 
 /// Texels per uv unit at level 0 of every cached node (2^14): finer than any footprint the demo
@@ -571,7 +571,7 @@ impl<'a> CacheAccess<'a> {
 
     /// The override for graph `graph`.
     pub fn for_graph(&self, graph: u32) -> GraphOverride<'_, 'a> {
-        GraphOverride { access: self, graph }
+        GraphOverride { access: self, graph, level: Cell::new(None) }
     }
 
     fn fill(&self, graph: u32, node: NodeId, fp: &Footprint) -> Filtered {
@@ -611,6 +611,25 @@ impl GraphSource for CacheAccess<'_> {
 pub struct GraphOverride<'s, 'a> {
     access: &'s CacheAccess<'a>,
     graph: u32,
+    /// The last footprint covariance asked about and its level at [`LEVEL0_TEXELS_PER_UV`]:
+    /// every cached node of an evaluation is asked at the same footprint, and each computed the
+    /// level (two logarithms and a square root) and the cache again.
+    level: Cell<Option<(glam::Mat2, f32)>>,
+}
+
+impl GraphOverride<'_, '_> {
+    /// [`cache::level_for`] of `cov` at [`LEVEL0_TEXELS_PER_UV`], computed once per covariance.
+    #[inline]
+    fn level(&self, cov: glam::Mat2) -> f32 {
+        match self.level.get() {
+            Some((c, l)) if c == cov => l,
+            _ => {
+                let l = cache::level_for(cov, LEVEL0_TEXELS_PER_UV);
+                self.level.set(Some((cov, l)));
+                l
+            }
+        }
+    }
 }
 
 impl NodeOverride for GraphOverride<'_, '_> {
@@ -621,17 +640,25 @@ impl NodeOverride for GraphOverride<'_, '_> {
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
         let tex = nc.textures[self.graph as usize][node.0 as usize]?;
-        if !nc.baked {
+        // Node textures are laid out at LEVEL0_TEXELS_PER_UV; baked ones at their own density.
+        let level = if nc.baked {
+            None
+        } else {
             let min = nc.min_level[self.graph as usize][node.0 as usize];
-            if cache::level_for(fp.cov, LEVEL0_TEXELS_PER_UV) < f32::from(min) {
+            let level = self.level(fp.cov);
+            if level < f32::from(min) {
                 return None; // finer than level 0 or than the plan's threshold: evaluate directly
             }
-        }
+            Some(level)
+        };
         let fill = |req: cache::TexelRequest| {
             let f = self.access.fill(self.graph, node, &Footprint::new(req.uv, req.covariance()));
             [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
         };
-        let v = nc.cache.lookup(tex, fp.uv, fp.cov, nc.filter, &fill);
+        let v = match level {
+            Some(level) => nc.cache.lookup_with_level(tex, fp.uv, fp.cov, level, nc.filter, &fill),
+            None => nc.cache.lookup(tex, fp.uv, fp.cov, nc.filter, &fill),
+        };
         let ty = self.access.graphs[self.graph as usize].graph().node_type(node);
         let mut out = Filtered::constant(graph::Value::splat(ty, 0.0));
         for (k, m) in out.ch.iter_mut().enumerate().take(3) {
