@@ -61,7 +61,7 @@ pub struct PixelRay {
 /// [`first_vertex_jacobian`] with `hit`'s [`LocalGeometry`] already computed (a path computes it
 /// once per vertex: the tracker, the texture footprint and the recentring all read it).
 pub fn first_vertex_jacobian_with(ray: &PixelRay, hit: &Vertex, local: &LocalGeometry) -> DMat2 {
-    let (dir, g) = (ray.dir, local.geometric_normal);
+    let (dir, g) = (ray.dir, local.geometric_normal(hit.n));
     let s = (hit.p - ray.origin).dot(dir) / dir.length_squared();
     let dpx = transfer(DVec3::ZERO, dir, ray.d_dir_dpx, s, g);
     let dpy = transfer(DVec3::ZERO, dir, ray.d_dir_dpy, s, g);

@@ -75,7 +75,7 @@ impl RayCone {
 
     /// The footprint (tangent-plane covariance) of the cone at `hit` for its current width.
     pub fn footprint(&self, hit: &Vertex) -> DMat2 {
-        let g = hit.local().geometric_normal;
+        let g = hit.local().geometric_normal(hit.n);
         let (e1, e2) = orthonormal_basis(self.dir);
         // Project the cross-section along the ray onto the tangent plane.
         let m0 = to_tangent(hit, transfer(e1, self.dir, DVec3::ZERO, 0.0, g));
@@ -90,7 +90,7 @@ impl RayCone {
         if self.dir.dot(hit.n) > 0.0 {
             kappa = -kappa; // curvature seen from the side the ray arrives from
         }
-        let cos = cos_floor(self.dir.dot(l.geometric_normal)).abs();
+        let cos = cos_floor(self.dir.dot(l.geometric_normal(hit.n))).abs();
         let dphi = kappa * self.width / cos;
         self.spread = match scatter {
             Scatter::Reflection => self.spread + 2.0 * dphi,
@@ -177,7 +177,7 @@ impl PbrtDifferentials {
     /// Moves to `hit`: transfers the differentials onto its tangent plane (or approximates them
     /// from the camera) and returns the footprint there.
     pub fn advance(&mut self, hit: &Vertex) -> DMat2 {
-        let g = hit.local().geometric_normal;
+        let g = hit.local().geometric_normal(hit.n);
         if self.has_differentials {
             let s = (hit.p - self.origin).dot(self.dir);
             for k in 0..2 {

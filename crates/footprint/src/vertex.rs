@@ -98,19 +98,7 @@ impl Vertex {
         let dn0 = self.dndu * j_geo.x_axis.x + self.dndv * j_geo.x_axis.y;
         let dn1 = self.dndu * j_geo.y_axis.x + self.dndv * j_geo.y_axis.y;
         let shape = DMat2::from_cols(DVec2::new(t.dot(dn0), b.dot(dn0)), DVec2::new(t.dot(dn1), b.dot(dn1)));
-        let g = p0.cross(p1);
-        let gl = g.length();
-        let geometric_normal = if gl > 1e-12 && gl.is_finite() {
-            let g = g / gl;
-            if g.dot(n) < 0.0 {
-                -g
-            } else {
-                g
-            }
-        } else {
-            n
-        };
-        LocalGeometry { tangent_map: [p0, p1], shape, uv_jacobian: j_uv, geometric_normal }
+        LocalGeometry { tangent_map: [p0, p1], shape, uv_jacobian: j_uv }
     }
 
     /// The pseudo-inverse and the clamped inverse of the uv map `m` (see [`Vertex::local`]).
@@ -160,8 +148,26 @@ pub struct LocalGeometry {
     pub shape: DMat2,
     /// `J_uv = ∂(u, v)/∂Δx` (clamped inverse, see [`Vertex::local`]).
     pub uv_jacobian: DMat2,
-    /// Unit normal of the true tangent plane (`span P`), on the side of `n`; `n` if degenerate.
-    pub geometric_normal: DVec3,
+}
+
+impl LocalGeometry {
+    /// Unit normal of the true tangent plane (`span P`), on the side of the vertex's shading
+    /// normal `n`; `n` if degenerate. Computed on request: only a path's first vertex and the
+    /// ray-cone and pbrt estimators read it, and it was a third of [`Vertex::local`].
+    pub fn geometric_normal(&self, n: DVec3) -> DVec3 {
+        let g = self.tangent_map[0].cross(self.tangent_map[1]);
+        let gl = g.length();
+        if gl > 1e-12 && gl.is_finite() {
+            let g = g / gl;
+            if g.dot(n) < 0.0 {
+                -g
+            } else {
+                g
+            }
+        } else {
+            n
+        }
+    }
 }
 
 /// How the path continues at a vertex: the half-vector constraint that relates its neighbours.
@@ -252,6 +258,6 @@ mod tests {
         let l = v.local();
         assert!((l.shape - DMat2::IDENTITY / r).abs_diff_eq(DMat2::ZERO, 1e-12));
         assert!((l.tangent_map[0] - t).length() < 1e-12);
-        assert!((l.geometric_normal - n).length() < 1e-12);
+        assert!((l.geometric_normal(n) - n).length() < 1e-12);
     }
 }

@@ -103,7 +103,7 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex, lo
     // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
     let o = cam.ray.o.as_dvec3();
     let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
-    let g = local.geometric_normal;
+    let g = local.geometric_normal(v.n);
     let (num, den) = ((v.p - o).dot(g), dc.dot(g));
     if !(num * den > 0.0) {
         return CentreShift::default();
