@@ -3,7 +3,7 @@
 use glam::{DMat2, DVec2, DVec3};
 
 use crate::mat::clamp_covariance;
-use crate::vertex::{LocalGeometry, Vertex};
+use crate::vertex::Vertex;
 use crate::{MAX_VARIANCE, MIN_COSINE};
 
 /// Standard deviation of the pixel filter, in pixels.
@@ -41,7 +41,8 @@ pub fn first_vertex_jacobian(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    first_vertex_jacobian_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, &hit.local())
+    let g = hit.local().geometric_normal(hit.n);
+    first_vertex_jacobian_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, g)
 }
 
 /// A camera ray and its direction's derivatives per pixel, as [`first_vertex_jacobian`] reads
@@ -58,10 +59,11 @@ pub struct PixelRay {
     pub d_dir_dpy: DVec3,
 }
 
-/// [`first_vertex_jacobian`] with `hit`'s [`LocalGeometry`] already computed (a path computes it
-/// once per vertex: the tracker, the texture footprint and the recentring all read it).
-pub fn first_vertex_jacobian_with(ray: &PixelRay, hit: &Vertex, local: &LocalGeometry) -> DMat2 {
-    let (dir, g) = (ray.dir, local.geometric_normal(hit.n));
+/// [`first_vertex_jacobian`] with `hit`'s geometric normal already computed
+/// ([`crate::LocalGeometry::geometric_normal`]; a path computes it once at its first vertex,
+/// where the recentring reads it too).
+pub fn first_vertex_jacobian_with(ray: &PixelRay, hit: &Vertex, geometric_normal: DVec3) -> DMat2 {
+    let (dir, g) = (ray.dir, geometric_normal);
     let s = (hit.p - ray.origin).dot(dir) / dir.length_squared();
     let dpx = transfer(DVec3::ZERO, dir, ray.d_dir_dpx, s, g);
     let dpy = transfer(DVec3::ZERO, dir, ray.d_dir_dpy, s, g);
@@ -82,12 +84,13 @@ pub fn first_vertex_variance(
     d_dir_dpy: DVec3,
     hit: &Vertex,
 ) -> DMat2 {
-    first_vertex_variance_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, &hit.local())
+    let g = hit.local().geometric_normal(hit.n);
+    first_vertex_variance_with(&PixelRay { origin: camera_origin, dir, d_dir_dpx, d_dir_dpy }, hit, g)
 }
 
-/// [`first_vertex_variance`] with `hit`'s [`LocalGeometry`] already computed.
-pub fn first_vertex_variance_with(ray: &PixelRay, hit: &Vertex, local: &LocalGeometry) -> DMat2 {
-    let j = first_vertex_jacobian_with(ray, hit, local);
+/// [`first_vertex_variance`] with `hit`'s geometric normal already computed.
+pub fn first_vertex_variance_with(ray: &PixelRay, hit: &Vertex, geometric_normal: DVec3) -> DMat2 {
+    let j = first_vertex_jacobian_with(ray, hit, geometric_normal);
     let v = j * j.transpose() * (PIXEL_SIGMA * PIXEL_SIGMA);
     clamp_covariance(v, MAX_VARIANCE).cov
 }

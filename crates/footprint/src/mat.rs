@@ -196,6 +196,9 @@ pub fn clamp_covariance(m: DMat2, max_variance: f64) -> Clamped {
     let s = symmetrize(m);
     // Eigenvalues without the angle first: most covariances need no clamping.
     let mean = 0.5 * (s.x_axis.x + s.y_axis.y);
+    if comfortably_within(s, mean, max_variance) {
+        return Clamped { cov: s, clamped_above: false };
+    }
     let d = hypot(0.5 * (s.x_axis.x - s.y_axis.y), s.x_axis.y);
     if mean - d >= 0.0 && mean + d <= max_variance {
         return Clamped { cov: s, clamped_above: false };
@@ -205,6 +208,16 @@ pub fn clamp_covariance(m: DMat2, max_variance: f64) -> Clamped {
         cov: sym_from_eigen(l1.clamp(0.0, max_variance), l2.clamp(0.0, max_variance), psi),
         clamped_above: l1 > max_variance,
     }
+}
+
+/// Whether the symmetric `s` (eigenvalues `mean ± d`) is clearly positive definite and below
+/// `max_variance`, decided without the square root of `d`: `det = λ₁λ₂ ≥ 1e-6 mean²` puts the
+/// smaller eigenvalue at `det/λ₁ ≥ 5e-7 mean`, far above the rounding of `mean − d`, and the
+/// larger is below the trace. Where it holds, [`clamp_covariance`]'s eigenvalue test holds too.
+#[inline]
+fn comfortably_within(s: DMat2, mean: f64, max_variance: f64) -> bool {
+    let det = s.x_axis.x * s.y_axis.y - s.x_axis.y * s.y_axis.x;
+    mean > 0.0 && det >= 1e-6 * mean * mean && 2.0 * mean <= 0.5 * max_variance
 }
 
 /// Outer product `a bᵀ`.
@@ -317,6 +330,34 @@ mod tests {
         let w = DVec2::new(-a.y, a.x).normalize();
         assert!(((c * w).length() - 1e3).abs() < 1e-6);
     }
+
+    /// Where the root-free test claims a matrix, the eigenvalue test would have passed it too
+    /// (so the clamp returns the same matrix either way); it claims most covariances.
+    #[test]
+    fn comfortably_within_implies_the_eigenvalue_test() {
+        let mut st = 3u64;
+        let (mut claimed, mut total) = (0, 0);
+        for k in 0..50_000 {
+            let a = DVec2::new(lcg(&mut st), lcg(&mut st));
+            let b = DVec2::new(lcg(&mut st), lcg(&mut st)) * 10f64.powi(-(k % 12));
+            let scale = 10f64.powi((k % 9) as i32 * 4 - 16);
+            // Σ = a aᵀ + b bᵀ: positive semi-definite, from well to badly conditioned.
+            let m = symmetrize((outer(a, a) + outer(b, b)) * scale);
+            for max in [MAX_VARIANCE_TEST, 1e-3] {
+                total += 1;
+                let mean = 0.5 * (m.x_axis.x + m.y_axis.y);
+                if comfortably_within(m, mean, max) {
+                    claimed += 1;
+                    let d = hypot(0.5 * (m.x_axis.x - m.y_axis.y), m.x_axis.y);
+                    assert!(mean - d >= 0.0 && mean + d <= max, "{m} {max}");
+                }
+            }
+        }
+        // A fifth of these (most are built badly conditioned or above the lower maximum).
+        assert!(claimed > total / 10 && claimed < total, "{claimed} of {total}");
+    }
+
+    const MAX_VARIANCE_TEST: f64 = 1e16;
 
     #[test]
     fn covariance_clamp() {

@@ -13,7 +13,7 @@ use footprint::{
     first_vertex_variance_with, half_vector_variance, FootprintTracker, LocalGeometry, PbrtDifferentials, PixelRay,
     RayCone, Scatter, Vertex,
 };
-use glam::{DMat2, Vec3};
+use glam::{DMat2, DVec3, Vec3};
 use std::str::FromStr;
 
 /// Which footprint estimator paths carry (`--footprint`).
@@ -104,14 +104,14 @@ pub enum PathFootprint {
 }
 
 impl PathFootprint {
-    /// Starts at the first hit `x1` (whose local geometry is `local`) of camera ray `cam`;
-    /// returns the state and `var(Δx₁)`.
+    /// Starts at the first hit `x1` of camera ray `cam`, whose local geometry is `local` and
+    /// geometric normal `normal`; returns the state and `var(Δx₁)`.
     pub fn start(
         mode: FootprintMode,
         camera: &Camera,
         cam: &CameraRay,
         x1: &Vertex,
-        local: &LocalGeometry,
+        (local, normal): (&LocalGeometry, DVec3),
         spp: u32,
     ) -> (Self, DMat2) {
         let o = cam.ray.o.as_dvec3();
@@ -120,7 +120,7 @@ impl PathFootprint {
             FootprintMode::Covariance => {
                 let ray =
                     PixelRay { origin: o, dir: d, d_dir_dpx: cam.dd_dx.as_dvec3(), d_dir_dpy: cam.dd_dy.as_dvec3() };
-                let var = first_vertex_variance_with(&ray, x1, local);
+                let var = first_vertex_variance_with(&ray, x1, normal);
                 (PathFootprint::Covariance(FootprintTracker::start_path_with(o, x1, local, var)), var)
             }
             FootprintMode::RayCone => {

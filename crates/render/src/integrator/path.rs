@@ -19,7 +19,7 @@ use crate::scene::Scene;
 use crate::shading::{GraphSource, TextureEvaluator};
 use crate::texture::ShadeContext;
 use footprint::{LocalGeometry, Vertex};
-use glam::{DMat2, DVec2, Mat2, Vec2, Vec3};
+use glam::{DMat2, DVec2, DVec3, Mat2, Vec2, Vec3};
 
 /// Offsets a ray origin off the surface along the geometric normal, on the side of `d`.
 #[inline]
@@ -94,7 +94,12 @@ struct CentreShift {
 /// for estimators other than the covariance tracker (the ray cone and pbrt-style differentials
 /// keep their published centring), when the centre's ray does not meet the plane in front of
 /// the camera, or for a non-finite result.
-fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex, local: &LocalGeometry) -> CentreShift {
+fn first_vertex_shift(
+    settings: &RenderSettings,
+    cam: &CameraRay,
+    v: &Vertex,
+    (local, g): (&LocalGeometry, DVec3),
+) -> CentreShift {
     if settings.footprint != FootprintMode::Covariance || cam.film_offset == Vec2::ZERO {
         return CentreShift::default();
     }
@@ -103,7 +108,6 @@ fn first_vertex_shift(settings: &RenderSettings, cam: &CameraRay, v: &Vertex, lo
     // plane at `pc`; nothing to move toward when it leaves parallel to or away from the plane.
     let o = cam.ray.o.as_dvec3();
     let dc = (cam.d_unnormalised - cam.dd_dx * cam.film_offset.x - cam.dd_dy * cam.film_offset.y).as_dvec3();
-    let g = local.geometric_normal(v.n);
     let (num, den) = ((v.p - o).dot(g), dc.dot(g));
     if !(num * den > 0.0) {
         return CentreShift::default();
@@ -189,10 +193,10 @@ impl FootprintCarrier {
                 // The first hit's local geometry serves the tracker's start, the recentring and
                 // the texture footprint: computed once (it was four times).
                 let local = v.local();
-                let (state, var) =
-                    PathFootprint::start(settings.footprint, &scene.camera, cam, &v, &local, settings.spp);
+                let at = (&local, local.geometric_normal(v.n));
+                let (state, var) = PathFootprint::start(settings.footprint, &scene.camera, cam, &v, at, settings.spp);
                 self.states[next] = state;
-                let shift = first_vertex_shift(settings, cam, &v, &local);
+                let shift = first_vertex_shift(settings, cam, &v, at);
                 (var, local.uv_jacobian, shift, shares_pixel_textures(settings))
             }
             Some((pv, bs)) => {
@@ -302,8 +306,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         let si = interaction(&scene.shapes, &cam.ray, &hit);
         let v = si.footprint_vertex();
         let local = v.local();
-        let (_, var) =
-            PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, &local, self.settings.spp);
+        let at = (&local, local.geometric_normal(v.n));
+        let (_, var) = PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, at, self.settings.spp);
         let fp = self.graph_footprint(&si, local.uv_jacobian, var);
         (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
     }

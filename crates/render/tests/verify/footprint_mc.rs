@@ -395,8 +395,14 @@ fn monte_carlo(scene: &Scene, bp: &BasePath, alphas: &[f64], seed: u64, frames: 
 /// one `advance` per bounce with the BSDF sample taken there).
 fn renderer_prediction(scene: &Scene, bp: &BasePath) -> Vec<DMat2> {
     let v = &bp.vertices;
-    let (mut fp, var1) =
-        PathFootprint::start(FootprintMode::Covariance, &scene.camera, &bp.cam, &v[0], &v[0].local(), 1);
+    let (mut fp, var1) = PathFootprint::start(
+        FootprintMode::Covariance,
+        &scene.camera,
+        &bp.cam,
+        &v[0],
+        (&v[0].local(), v[0].local().geometric_normal(v[0].n)),
+        1,
+    );
     let mut out = vec![var1];
     for i in 0..v.len() - 1 {
         out.push(fp.advance(&v[i], &bp.samples[i], bp.dirs[i], &v[i + 1]));
