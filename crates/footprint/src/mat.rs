@@ -293,7 +293,7 @@ mod tests {
             // Second column near a multiple of the first, at spreads from 1 down to 1e-15.
             let spread = 10f64.powi(-(k % 16));
             m.y_axis = m.x_axis * lcg(&mut st) + m.y_axis * spread;
-            let scale = 10f64.powi((k % 7) as i32 * 4 - 12);
+            let scale = 10f64.powi((k % 7) * 4 - 12);
             let m = m * scale;
             for (ratio, min_abs) in [(1e-6, 0.0), (1e-4, 1e-12), (0.3, 0.0)] {
                 let svd = Svd2::new(m);
@@ -340,7 +340,7 @@ mod tests {
         for k in 0..50_000 {
             let a = DVec2::new(lcg(&mut st), lcg(&mut st));
             let b = DVec2::new(lcg(&mut st), lcg(&mut st)) * 10f64.powi(-(k % 12));
-            let scale = 10f64.powi((k % 9) as i32 * 4 - 16);
+            let scale = 10f64.powi((k % 9) * 4 - 16);
             // Σ = a aᵀ + b bᵀ: positive semi-definite, from well to badly conditioned.
             let m = symmetrize((outer(a, a) + outer(b, b)) * scale);
             for max in [MAX_VARIANCE_TEST, 1e-3] {
