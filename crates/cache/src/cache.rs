@@ -317,14 +317,18 @@ impl TileCache {
     where
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
-        let level = level_for(cov_uv, self.textures[tex.0 as usize].desc.texels_per_uv);
+        // Anisotropic lookups choose their probes' level themselves.
+        let level = match filter.kind {
+            FilterKind::Trilinear => level_for(cov_uv, self.textures[tex.0 as usize].desc.texels_per_uv),
+            FilterKind::Anisotropic { .. } => f32::NAN,
+        };
         self.lookup_with_level(tex, uv, cov_uv, level, filter, fill)
     }
 
     /// [`TileCache::lookup`] whose caller already computed `level`, which must be
     /// [`level_for`]`(cov_uv, texels_per_uv)` of the texture's description: a caller that
     /// compares the level with a threshold first (two logarithms and a square root) need not
-    /// have it computed twice.
+    /// have it computed twice. Anisotropic filters ignore it (their probes' level is their own).
     pub fn lookup_with_level<F>(
         &self,
         tex: TextureId,

@@ -221,7 +221,7 @@ pub struct NodeCache {
 }
 
 /// A uv rectangle `(min, max)`.
-type UvRect = (glam::Vec2, glam::Vec2);
+pub(crate) type UvRect = (glam::Vec2, glam::Vec2);
 
 fn union(r: Option<UvRect>, lo: glam::Vec2, hi: glam::Vec2) -> Option<UvRect> {
     Some(match r {
@@ -230,8 +230,9 @@ fn union(r: Option<UvRect>, lo: glam::Vec2, hi: glam::Vec2) -> Option<UvRect> {
     })
 }
 
-/// The uv rectangle each material's shapes cover.
-fn material_uv_bounds(scene: &Scene) -> Vec<Option<UvRect>> {
+/// The uv rectangle each material's shapes cover (a mesh without texture coordinates, a sphere
+/// and a disk cover [0, 1]²); `None` for a material no shape carries.
+pub(crate) fn material_uv_bounds(scene: &Scene) -> Vec<Option<UvRect>> {
     use crate::geometry::ShapeGeometry;
     let mut b: Vec<Option<UvRect>> = vec![None; scene.materials.len()];
     for shape in &scene.shapes {

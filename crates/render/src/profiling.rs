@@ -23,7 +23,9 @@ use plan::profile::{
     SceneId, Stream, FINER_THAN_LEVEL0, PROFILE_SCHEMA,
 };
 
-use crate::caching::{channels, means_suffice, node_texture, worth_caching, LEVEL0_TEXELS_PER_UV, MAX_LEVEL};
+use crate::caching::{
+    channels, material_uv_bounds, means_suffice, node_texture, worth_caching, LEVEL0_TEXELS_PER_UV, MAX_LEVEL,
+};
 use crate::integrator::{for_each_bucket, render_pixel_with, NoObserver, RenderCounts, RenderSettings};
 use crate::material::MaterialGraph;
 use crate::scene::Scene;
@@ -418,6 +420,7 @@ fn node_overhead_ns(
 /// outputs come from.
 fn profile_streams(scene: &Scene, tap: &Profiler) -> Vec<Stream> {
     let mut out = Vec::new();
+    let bounds = material_uv_bounds(scene);
     for (mi, m) in scene.materials.iter().enumerate() {
         for mg in &m.graphs {
             let g = scene.graphs[mg.graph as usize].graph();
@@ -431,32 +434,11 @@ fn profile_streams(scene: &Scene, tap: &Profiler) -> Vec<Stream> {
                 })
                 .collect();
             let mut st = stream_of(&tap.streams[mg.stream as usize], format!("material {mi}"), mg.graph, outputs);
-            st.uv_bounds = uv_bounds(scene, mi as u32);
+            st.uv_bounds = bounds[mi].map(|(lo, hi)| [lo.x, lo.y, hi.x, hi.y].map(f64::from));
             out.push(st);
         }
     }
     out
-}
-
-/// The uv range of the surfaces that carry material `material`, `[u_min, v_min, u_max, v_max]`:
-/// meshes' texture coordinates (a mesh without them gives its triangles' corners (0, 0), (1, 0)
-/// and (0, 1)), spheres and disks [0, 1]². `None` if no shape carries it.
-fn uv_bounds(scene: &Scene, material: u32) -> Option<[f64; 4]> {
-    let mut b: Option<[f64; 4]> = None;
-    let mut add = |u: f64, v: f64| {
-        let r = b.get_or_insert([u, v, u, v]);
-        *r = [r[0].min(u), r[1].min(v), r[2].max(u), r[3].max(v)];
-    };
-    for s in scene.shapes.iter().filter(|s| s.material == material) {
-        match &s.geometry {
-            crate::geometry::ShapeGeometry::Mesh { mesh, .. } => match &mesh.uvs {
-                Some(uvs) => uvs.iter().for_each(|p| add(f64::from(p.x), f64::from(p.y))),
-                None => [(0.0, 0.0), (1.0, 1.0)].into_iter().for_each(|(u, v)| add(u, v)),
-            },
-            _ => [(0.0, 0.0), (1.0, 1.0)].into_iter().for_each(|(u, v)| add(u, v)),
-        }
-    }
-    b
 }
 
 /// The layout of the cache the profile's tile reads are counted in ([`node_texture`] in tiles

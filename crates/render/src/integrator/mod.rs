@@ -459,13 +459,17 @@ fn render_pixel_aov<S: GraphSource>(
 /// cover its filter evenly), and the random stream its path draws from. Every renderer entry
 /// point (render, profiling, `tessera footprint`) takes its samples from here, so they agree.
 pub fn camera_sample(scene: &Scene, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
-    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
-    camera_sample_in(scene, &PixelSequence::new(seed, pixel_index), seed, x, y, s)
+    camera_sample_in(scene, &PixelSequence::new(seed, pixel_index(scene, x, y)), seed, x, y, s)
+}
+
+/// The index of pixel `(x, y)` that seeds its streams.
+fn pixel_index(scene: &Scene, x: u32, y: u32) -> u64 {
+    u64::from(y) * u64::from(scene.camera.width) + u64::from(x)
 }
 
 /// [`camera_sample`] with the pixel's sample sequence already set up (once per pixel).
 fn camera_sample_in(scene: &Scene, seq: &PixelSequence, seed: u64, x: u32, y: u32, s: u32) -> (CameraRay, Rng) {
-    let pixel_index = u64::from(y) * u64::from(scene.camera.width) + u64::from(x);
+    let pixel_index = pixel_index(scene, x, y);
     let offset = scene.rfilter.warp(seq.at(u64::from(s)));
     let film = Vec2::new(x as f32 + 0.5, y as f32 + 0.5) + offset;
     let mut cam = scene.camera.generate_ray(film);
@@ -490,7 +494,7 @@ pub fn render_pixel_with<S: GraphSource, O: PathObserver>(
 ) -> PixelSum {
     let mut sum = PixelSum::default();
     textures.begin_pixel(x, y);
-    let seq = PixelSequence::new(settings.seed, u64::from(y) * u64::from(scene.camera.width) + u64::from(x));
+    let seq = PixelSequence::new(settings.seed, pixel_index(scene, x, y));
     for s in samples {
         let (cam, mut rng) = camera_sample_in(scene, &seq, settings.seed, x, y, s);
         textures.begin_sample(s);
