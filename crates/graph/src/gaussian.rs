@@ -30,7 +30,33 @@ pub fn exp_damping(x: f64) -> f64 {
 /// Standard normal cumulative distribution Φ(z), accurate in both tails.
 #[inline]
 pub fn cdf(z: f64) -> f64 {
-    0.5 * libm::erfc(-z * FRAC_1_SQRT_2)
+    0.5 * erfc(-z * FRAC_1_SQRT_2)
+}
+
+extern "C" {
+    /// The C library's complementary error function (glibc, musl, macOS's and the Universal C
+    /// Runtime's all have one; Rust's standard library links it already).
+    #[link_name = "erfc"]
+    fn c_erfc(x: f64) -> f64;
+}
+
+/// Below this `|x|` the `libm` crate's erfc is a rational function without an exponential,
+/// faster than the C library's call (3 ns against 5.5 ns on this project's machine).
+const ERFC_RATIONAL_LIMIT: f64 = 0.84375;
+
+/// `erfc(x)`, accurate to a few units in the last place everywhere: the `libm` crate's near 0,
+/// the C library's beyond [`ERFC_RATIONAL_LIMIT`], where `libm`'s takes two of its own `exp`s
+/// and measured 1.7–4× slower (16–22 ns against 10–12 ns from 0.85 to 27, 22 ns against 5 ns
+/// for negative arguments). The two differ by at most 5 ulp; filtered values are rounded to
+/// `f32` after.
+#[inline]
+pub fn erfc(x: f64) -> f64 {
+    if x.abs() < ERFC_RATIONAL_LIMIT || x.is_nan() {
+        libm::erfc(x)
+    } else {
+        // SAFETY: `erfc` is a pure function of one double with no preconditions.
+        unsafe { c_erfc(x) }
+    }
 }
 
 /// `(Φ(z), 1 − Φ(z))` from one erfc, each accurate in its own tail.
@@ -639,6 +665,26 @@ mod tests {
                 f(x) * pdf((x - m) / s) / s * h
             })
             .sum()
+    }
+
+    /// The C library's erfc agrees with the `libm` crate's (an independent implementation) to a
+    /// few ulp from deep in the lower tail to underflow, and both ends give its limits.
+    #[test]
+    fn erfc_agrees_with_libm() {
+        let mut worst = 0u64;
+        for i in 0..=600_000 {
+            let x = -6.0 + 34.0 * i as f64 / 600_000.0;
+            let (a, b) = (erfc(x), libm::erfc(x));
+            if b == 0.0 || b < f64::MIN_POSITIVE {
+                assert!(a.abs() <= f64::MIN_POSITIVE, "erfc({x}) = {a}, libm {b}");
+                continue;
+            }
+            worst = worst.max(a.to_bits().abs_diff(b.to_bits()));
+        }
+        assert!(worst <= 8, "{worst} ulp");
+        assert_eq!(erfc(f64::INFINITY), 0.0);
+        assert_eq!(erfc(f64::NEG_INFINITY), 2.0);
+        assert!(erfc(f64::NAN).is_nan());
     }
 
     #[test]
