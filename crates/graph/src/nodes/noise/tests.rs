@@ -140,6 +140,44 @@ mod perlin2 {
         assert!(worst < 1.5e-3 && worst < 0.02 * rms, "worst {worst:.2e} against RMS {rms:.3e}");
     }
 
+    /// The shorter tails of strongly damped octaves ([`PERLIN_DAMPED_TAILS`]): what each leaves
+    /// out of the value at σₑ, times the largest damping that uses it, stays under the bound on
+    /// [`PERLIN_DAMPED_TAIL`]'s error for an undamped octave (1.5e-3), so no damped octave moves
+    /// by more than the longest damped tail moves one. The tails also shorten the sum.
+    #[test]
+    fn damped_tails_scale_with_the_damping() {
+        let mut upper = 1.0;
+        let mut corners_before = f64::INFINITY;
+        for (below, tail) in [(1.0, PERLIN_DAMPED_TAIL)].into_iter().chain(PERLIN_DAMPED_TAILS) {
+            assert!(below <= upper && tail < PERLIN_TAIL);
+            let (mut worst, mut corners) = (0.0f64, 0u64);
+            for k in 0..4000 {
+                let p = DVec2::new((k as f64 * 0.61803) % 50.0, (k as f64 * 0.7548) % 50.0);
+                let s = DVec2::new(
+                    PERLIN_SIGMA_EXACT,
+                    if k % 2 == 0 { PERLIN_SIGMA_EXACT } else { 0.2 + (k as f64 * 0.1) % 0.55 },
+                );
+                let (mut a, mut b) = ([(0.0, 0.0, 0.0); 4], [(0.0, 0.0, 0.0); 4]);
+                let w = &mut crate::eval::Work::default();
+                perlin_exact_n::<MAX_AXIS, true>(p, s, PERLIN_TAIL, &[HashSel::Full], &mut a, w);
+                let w = &mut crate::eval::Work::default();
+                perlin_exact_n::<MAX_AXIS, true>(p, s, tail, &[HashSel::Full], &mut b, w);
+                corners += w.lattice;
+                worst = worst.max((a[0].0 - b[0].0).abs());
+            }
+            let corners = corners as f64 / 4000.0;
+            println!("damping below {below}: tail {tail}, worst {worst:.2e} (× {below}: {:.2e}), {corners:.1} corners", worst * below);
+            assert!(worst * below < 1.5e-3, "tail {tail} below damping {below}: {worst:.2e}");
+            assert!(corners < corners_before);
+            // The octave's tail at that damping and just below it.
+            assert_eq!(<Dim<2> as PerlinOctave<2>>::tail(below * (1.0 - 1e-12)), tail);
+            corners_before = corners;
+            upper = below;
+        }
+        assert_eq!(<Dim<2> as PerlinOctave<2>>::tail(1.0), PERLIN_TAIL);
+        assert_eq!(<Dim<2> as PerlinOctave<2>>::tail(0.5), PERLIN_DAMPED_TAIL);
+    }
+
     /// The corners beyond ±`PERLIN_TAIL`·σ carry under 5e-5 of filtered noise (against a sum
     /// over ±6σ).
     #[test]
