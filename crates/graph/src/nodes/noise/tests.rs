@@ -166,7 +166,10 @@ mod perlin2 {
                 worst = worst.max((a[0].0 - b[0].0).abs());
             }
             let corners = corners as f64 / 4000.0;
-            println!("damping below {below}: tail {tail}, worst {worst:.2e} (× {below}: {:.2e}), {corners:.1} corners", worst * below);
+            println!(
+                "damping below {below}: tail {tail}, worst {worst:.2e} (× {below}: {:.2e}), {corners:.1} corners",
+                worst * below
+            );
             assert!(worst * below < 1.5e-3, "tail {tail} below damping {below}: {worst:.2e}");
             assert!(corners < corners_before);
             // The octave's tail at that damping and just below it.
