@@ -501,9 +501,6 @@ impl Accel {
         if self.prims.is_empty() {
             return None;
         }
-        if self.prims.len() <= BRUTE_FORCE_PRIMS {
-            return self.closest_each(shapes, ray, only);
-        }
         let bray = bvh_ray(ray);
         let mut hit = obvhs::ray::RayHit::none();
         let mut best_bary = Vec2::ZERO;
@@ -529,35 +526,6 @@ impl Accel {
     }
 }
 
-/// Up to this many primitives a query tests each in turn instead of walking the BVH: the few
-/// spheres and disks kept beside Embree's meshes ([`crate::embree`]). Walking the BVH over 3
-/// spheres took a quarter of a render (dielectrics), more than testing all three.
-const BRUTE_FORCE_PRIMS: usize = 4;
-
-impl Accel {
-    /// [`Self::closest`] by testing every primitive, each within the nearest hit so far.
-    fn closest_each(&self, shapes: &[Shape], ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
-        let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
-        let mut best: Option<PreliminaryHit> = None;
-        for (id, pr) in self.prims.iter().enumerate() {
-            if only.is_some_and(|s| pr.shape != s) {
-                continue;
-            }
-            let tmax = best.map_or(ray.tmax, |b| b.t);
-            if let Some((t, bary)) = self.intersect_prim(shapes, id, o, d, ray.tmin, tmax) {
-                best = Some(PreliminaryHit { t, shape: pr.shape, index: pr.index, bary });
-            }
-        }
-        best
-    }
-
-    /// [`Intersector::occluded`] by testing every primitive.
-    fn occluded_each(&self, shapes: &[Shape], ray: &Ray) -> bool {
-        let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
-        (0..self.prims.len()).any(|id| self.intersect_prim(shapes, id, o, d, ray.tmin, ray.tmax).is_some())
-    }
-}
-
 impl Intersector for Accel {
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
         self.closest(shapes, ray, None)
@@ -570,9 +538,6 @@ impl Intersector for Accel {
     fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
         if self.prims.is_empty() {
             return false;
-        }
-        if self.prims.len() <= BRUTE_FORCE_PRIMS {
-            return self.occluded_each(shapes, ray);
         }
         let bray = bvh_ray(ray);
         let (o, d) = (Vec3A::from(ray.o), Vec3A::from(ray.d));
