@@ -74,7 +74,7 @@ pub enum SceneAccel {
 }
 
 impl Intersector for SceneAccel {
-    #[inline(always)]
+    #[inline]
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
         match self {
             SceneAccel::Bvh(a) => a.intersect(shapes, ray),
@@ -82,7 +82,7 @@ impl Intersector for SceneAccel {
         }
     }
 
-    #[inline(always)]
+    #[inline]
     fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
         match self {
             SceneAccel::Bvh(a) => a.occluded(shapes, ray),
@@ -106,8 +106,7 @@ impl Intersector for SceneAccel {
 }
 
 /// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
-/// loads (for the meshes; spheres and disks stay in a built-in BVH beside it, see
-/// [`crate::embree`]: the faster on every scene measured, triangles alone, spheres alone, both), else
+/// loads (it is the faster on every scene measured: triangles alone, spheres alone, both), else
 /// the built-in BVH (also when Embree fails, with a warning on stderr); an error when
 /// [`Backend::Embree`] is asked for and cannot be had, or when the built-in BVH cannot hold the
 /// scene.

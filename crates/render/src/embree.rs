@@ -5,20 +5,19 @@
 //! the renderer keeps its own BVH ([`Accel`]). Debian's `libembree3-3` package provides it
 //! (`scripts/install-embree.sh`).
 //!
-//! Embree holds the meshes, one triangle geometry per mesh shape whose id is the shape's index
-//! (primitive ids are the mesh's triangle indices). Spheres and disks stay in a small built-in
-//! BVH of their own ([`Accel`], the renderer's own tests, the sphere's in double precision): a
-//! closest-hit query asks Embree first and then that BVH for anything nearer, an occlusion query
-//! asks both. Embree had held them too, as user geometries whose callbacks ran the same tests,
-//! but each callback cost more than the built-in BVH's whole query: scenes with spheres rendered
-//! 5–22 % slower through Embree than through the built-in BVH alone, while mesh scenes rendered
-//! 7–16 % faster (docs/benchmarks/mitsuba.md). Only the types and functions this file uses are
-//! declared, checked against Embree 3.13's `rtcore*.h`; the library must be a default build (one
-//! instance level, no minimum curve width, filter functions on), which Debian's is: the first
-//! two change the ray and context layouts and cannot be queried.
+//! Embree holds every shape, one geometry per shape whose id is the shape's index: meshes as
+//! triangle geometries (primitive ids are the mesh's triangle indices), spheres and disks as
+//! user geometries whose callbacks run the renderer's own tests (the sphere's in double
+//! precision), so one traversal answers each closest-hit and occlusion query; the closest hit on
+//! one sphere or disk alone is asked of a small built-in BVH of them. Only the types and
+//! functions this file uses are declared, checked against Embree 3.13's `rtcore*.h`; the library
+//! must be a default build (one instance level, no minimum curve width, filter functions on),
+//! which Debian's is: the first two change the ray and context layouts and cannot be queried.
 
-use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry};
-use glam::Vec2;
+use crate::geometry::{
+    intersect_disk, intersect_sphere, Accel, Intersector, PreliminaryHit, Ray, Shape, ShapeGeometry,
+};
+use glam::{Affine3A, Vec2, Vec3};
 use std::ffi::{c_char, c_void};
 use std::sync::OnceLock;
 
@@ -73,6 +72,40 @@ struct FilterArgs {
 
 type FilterFn = unsafe extern "C" fn(*const FilterArgs);
 
+/// `RTCBounds`.
+#[repr(C, align(16))]
+struct Bounds {
+    lower: [f32; 3],
+    _align0: f32,
+    upper: [f32; 3],
+    _align1: f32,
+}
+
+/// `RTCBoundsFunctionArguments`.
+#[repr(C)]
+struct BoundsArgs {
+    geometry_user_ptr: *mut c_void,
+    prim_id: u32,
+    time_step: u32,
+    bounds: *mut Bounds,
+}
+
+/// `RTCIntersectFunctionNArguments` and `RTCOccludedFunctionNArguments` (the same layout: the
+/// intersect callback's `rayhit` is the occluded callback's `ray`).
+#[repr(C)]
+struct UserArgs {
+    valid: *mut i32,
+    geometry_user_ptr: *mut c_void,
+    prim_id: u32,
+    context: *mut IntersectContext,
+    rays: *mut f32,
+    n: u32,
+    geom_id: u32,
+}
+
+type BoundsFn = unsafe extern "C" fn(*const BoundsArgs);
+type UserFn = unsafe extern "C" fn(*const UserArgs);
+
 /// `RTCIntersectContext` (one instance level, no minimum width).
 #[repr(C)]
 struct IntersectContext {
@@ -91,6 +124,7 @@ struct ShapeContext {
 
 const INVALID_ID: u32 = u32::MAX;
 const GEOMETRY_TYPE_TRIANGLE: u32 = 0;
+const GEOMETRY_TYPE_USER: u32 = 120;
 const BUFFER_TYPE_INDEX: u32 = 0;
 const BUFFER_TYPE_VERTEX: u32 = 1;
 const FORMAT_UINT3: u32 = 0x5003;
@@ -122,6 +156,11 @@ struct Api {
     set_new_geometry_buffer: unsafe extern "C" fn(Geometry, u32, u32, u32, usize, usize) -> *mut c_void,
     set_geometry_build_quality: unsafe extern "C" fn(Geometry, u32),
     commit_geometry: unsafe extern "C" fn(Geometry),
+    set_geometry_user_data: unsafe extern "C" fn(Geometry, *mut c_void),
+    set_geometry_user_primitive_count: unsafe extern "C" fn(Geometry, u32),
+    set_geometry_bounds_function: unsafe extern "C" fn(Geometry, BoundsFn, *mut c_void),
+    set_geometry_intersect_function: unsafe extern "C" fn(Geometry, UserFn),
+    set_geometry_occluded_function: unsafe extern "C" fn(Geometry, UserFn),
     attach_geometry_by_id: unsafe extern "C" fn(Scene, Geometry, u32),
     commit_scene: unsafe extern "C" fn(Scene),
     intersect1: unsafe extern "C" fn(Scene, *mut IntersectContext, *mut RtcRayHit),
@@ -176,6 +215,11 @@ impl Api {
             set_new_geometry_buffer: sym!("rtcSetNewGeometryBuffer"),
             set_geometry_build_quality: sym!("rtcSetGeometryBuildQuality"),
             commit_geometry: sym!("rtcCommitGeometry"),
+            set_geometry_user_data: sym!("rtcSetGeometryUserData"),
+            set_geometry_user_primitive_count: sym!("rtcSetGeometryUserPrimitiveCount"),
+            set_geometry_bounds_function: sym!("rtcSetGeometryBoundsFunction"),
+            set_geometry_intersect_function: sym!("rtcSetGeometryIntersectFunction"),
+            set_geometry_occluded_function: sym!("rtcSetGeometryOccludedFunction"),
             attach_geometry_by_id: sym!("rtcAttachGeometryByID"),
             commit_scene: sym!("rtcCommitScene"),
             intersect1: sym!("rtcIntersect1"),
@@ -234,14 +278,133 @@ unsafe extern "C" fn keep_one_shape(args: *const FilterArgs) {
     }
 }
 
-/// The scene's meshes in Embree, its spheres and disks in a built-in BVH.
+/// A sphere or disk as an Embree user geometry sees it (the callbacks' user pointer).
+enum Analytic {
+    Sphere { center: Vec3, radius: f32 },
+    Disk { to_object: Affine3A, to_world: Affine3A },
+}
+
+impl Analytic {
+    /// The renderer's own test ([`intersect_sphere`], [`intersect_disk`]).
+    #[inline]
+    fn intersect(&self, o: Vec3, d: Vec3, tmin: f32, tmax: f32) -> Option<f32> {
+        match self {
+            Analytic::Sphere { center, radius } => intersect_sphere(*center, *radius, o, d, tmin, tmax),
+            Analytic::Disk { to_object, .. } => intersect_disk(to_object, o, d, tmin, tmax),
+        }
+    }
+}
+
+/// Bounds callback of a sphere or disk: the box the built-in BVH gives it ([`Accel::build`]).
+unsafe extern "C" fn analytic_bounds(args: *const BoundsArgs) {
+    // SAFETY: Embree passes the user pointer set at build (a live `Analytic` owned by the
+    // accelerator) and a bounds record to write.
+    unsafe {
+        let args = &*args;
+        let (lo, hi) = match &*(args.geometry_user_ptr as *const Analytic) {
+            Analytic::Sphere { center, radius } => (*center - *radius, *center + *radius),
+            Analytic::Disk { to_world, .. } => {
+                let corners = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+                    .map(|(x, y)| to_world.transform_point3(Vec3::new(x, y, 0.0)));
+                let (lo, hi) =
+                    corners.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(l, h), c| (l.min(*c), h.max(*c)));
+                // The rounding of the transformed corners, as `geometry::padded` allows.
+                let pad = 1e-6 * (1.0 + (hi - lo).length() + ((lo + hi) * 0.5).abs().max_element());
+                (lo - pad, hi + pad)
+            }
+        };
+        args.bounds.write(Bounds { lower: lo.to_array(), _align0: 0.0, upper: hi.to_array(), _align1: 0.0 });
+    }
+}
+
+/// The query's one shape when it carries a filter (only `intersect_shape` sets one, always
+/// [`keep_one_shape`]), else `None`.
+///
+/// # Safety
+/// `context` is a live context passed by Embree to a query of this module.
+#[inline]
+unsafe fn only_shape(context: *const IntersectContext) -> Option<u32> {
+    // SAFETY: contexts with a filter are the first field of a `ShapeContext`, passed by a
+    // pointer to the whole of it.
+    unsafe { (*context).filter.map(|_| (*(context as *const ShapeContext)).shape) }
+}
+
+/// Field `k` of lane `i` of a callback's N structure-of-arrays rays: the ray's 12 fields
+/// (origin, near end, direction, time, far end at 8, mask, id, flags), then the hit's (normal,
+/// u, v, primitive id at 17, geometry id, instance id).
+///
+/// # Safety
+/// `args` comes from Embree, `k` < 20 for an intersect callback (< 12 for occluded), `i` < N.
+#[inline]
+unsafe fn field(args: &UserArgs, k: usize, i: usize) -> *mut f32 {
+    // SAFETY: within the N-lane arrays Embree passed.
+    unsafe { args.rays.add(k * args.n as usize + i) }
+}
+
+/// The distance at which valid lane `i` meets the callback's shape within its interval.
+///
+/// # Safety
+/// As [`field`]; the user pointer is the `Analytic` set at build.
+#[inline]
+unsafe fn lane_hit(args: &UserArgs, i: usize) -> Option<f32> {
+    // SAFETY: as documented.
+    unsafe {
+        if *args.valid.add(i) == 0 {
+            return None;
+        }
+        let shape = &*(args.geometry_user_ptr as *const Analytic);
+        let f = |k| *field(args, k, i);
+        shape.intersect(Vec3::new(f(0), f(1), f(2)), Vec3::new(f(4), f(5), f(6)), f(3), f(8))
+    }
+}
+
+/// Intersect callback of a sphere or disk: a valid lane that meets it nearer than its far end
+/// takes it as its hit. A query restricted to another shape ignores it (Embree applies a
+/// context filter to its own geometry types; a user geometry must apply it itself).
+unsafe extern "C" fn analytic_intersect(args: *const UserArgs) {
+    // SAFETY: Embree passes live arguments with N lanes of ray and hit fields.
+    unsafe {
+        let args = &*args;
+        if only_shape(args.context).is_some_and(|s| s != args.geom_id) {
+            return;
+        }
+        for i in 0..args.n as usize {
+            let Some(t) = lane_hit(args, i) else { continue };
+            *field(args, 8, i) = t;
+            for k in 12..17 {
+                *field(args, k, i) = 0.0;
+            }
+            *(field(args, 17, i) as *mut u32) = args.prim_id;
+            *(field(args, 18, i) as *mut u32) = args.geom_id;
+            *(field(args, 19, i) as *mut u32) = (*args.context).inst_id[0];
+        }
+    }
+}
+
+/// Occluded callback of a sphere or disk: a blocked lane's far end becomes −∞.
+unsafe extern "C" fn analytic_occluded(args: *const UserArgs) {
+    // SAFETY: Embree passes live arguments with N lanes of ray fields.
+    unsafe {
+        let args = &*args;
+        for i in 0..args.n as usize {
+            if lane_hit(args, i).is_some() {
+                *field(args, 8, i) = f32::NEG_INFINITY;
+            }
+        }
+    }
+}
+
+/// The whole scene in Embree (spheres and disks through callbacks).
 pub struct EmbreeAccel {
     api: &'static Api,
     device: Device,
     scene: Scene,
-    /// The spheres and disks (`None` when the scene has none).
+    /// What the user geometries' callbacks read (boxed: Embree keeps their addresses).
+    #[allow(clippy::vec_box)]
+    _analytic: Vec<Box<Analytic>>,
+    /// The spheres and disks again, for [`Intersector::intersect_shape`] on one of them (`None`
+    /// when the scene has none).
     analytic_bvh: Option<Accel>,
-    /// Triangles in the Embree scene (none: Embree is not asked).
     triangles: usize,
 }
 
@@ -252,7 +415,8 @@ unsafe impl Sync for EmbreeAccel {}
 
 impl Drop for EmbreeAccel {
     fn drop(&mut self) {
-        // SAFETY: both handles were created by this value and are released once.
+        // SAFETY: both handles were created by this value and are released once, the scene
+        // before the user data its geometries point at (the fields drop after this).
         unsafe {
             if !self.scene.is_null() {
                 (self.api.release_scene)(self.scene);
@@ -275,7 +439,7 @@ impl EmbreeAccel {
                 return Err("Embree: rtcNewDevice failed".into());
             }
             let scene = (api.new_scene)(device);
-            let accel = EmbreeAccel { api, device, scene, analytic_bvh: None, triangles: 0 };
+            let accel = EmbreeAccel { api, device, scene, _analytic: Vec::new(), analytic_bvh: None, triangles: 0 };
             if scene.is_null() {
                 return Err(accel.error("rtcNewScene"));
             }
@@ -288,7 +452,14 @@ impl EmbreeAccel {
             for (si, shape) in shapes.iter().enumerate() {
                 let mesh = match &shape.geometry {
                     ShapeGeometry::Mesh { mesh, .. } => mesh,
-                    ShapeGeometry::Sphere { .. } | ShapeGeometry::Disk { .. } => continue,
+                    ShapeGeometry::Sphere { center, radius, .. } => {
+                        accel.add_analytic(si, Analytic::Sphere { center: *center, radius: *radius })?;
+                        continue;
+                    }
+                    ShapeGeometry::Disk { to_object, to_world, .. } => {
+                        accel.add_analytic(si, Analytic::Disk { to_object: *to_object, to_world: *to_world })?;
+                        continue;
+                    }
                 };
                 if mesh.indices.is_empty() {
                     // Nothing to hit (loaded meshes always have triangles; shapes made in code
@@ -327,12 +498,40 @@ impl EmbreeAccel {
             if code != 0 {
                 return Err(format!("Embree {}: rtcCommitScene failed (error code {code})", api.version));
             }
-            let analytic = |s: &Shape| !matches!(s.geometry, ShapeGeometry::Mesh { .. });
-            if shapes.iter().any(analytic) {
-                accel.analytic_bvh = Some(Accel::build_where(shapes, analytic)?);
+            if !accel._analytic.is_empty() {
+                accel.analytic_bvh =
+                    Some(Accel::build_where(shapes, |s| !matches!(s.geometry, ShapeGeometry::Mesh { .. }))?);
             }
             Ok(accel)
         }
+    }
+
+    /// Attaches shape `si` as a user geometry of one primitive.
+    ///
+    /// # Safety
+    /// The scene is not committed yet.
+    unsafe fn add_analytic(&mut self, si: usize, shape: Analytic) -> Result<(), String> {
+        let api = self.api;
+        // SAFETY: as in `build`; the boxed shape outlives the scene (dropped after it).
+        unsafe {
+            let geom = (api.new_geometry)(self.device, GEOMETRY_TYPE_USER);
+            if geom.is_null() {
+                return Err(self.error("rtcNewGeometry (user)"));
+            }
+            self._analytic.push(Box::new(shape));
+            // The pointer is taken after the box has moved into place (moving a box asserts it
+            // is the only pointer to its value); boxes keep their address as the vector grows.
+            let user = &mut **self._analytic.last_mut().expect("just pushed") as *mut Analytic as *mut c_void;
+            (api.set_geometry_user_primitive_count)(geom, 1);
+            (api.set_geometry_user_data)(geom, user);
+            (api.set_geometry_bounds_function)(geom, analytic_bounds, std::ptr::null_mut());
+            (api.set_geometry_intersect_function)(geom, analytic_intersect);
+            (api.set_geometry_occluded_function)(geom, analytic_occluded);
+            (api.commit_geometry)(geom);
+            (api.attach_geometry_by_id)(self.scene, geom, si as u32);
+            (api.release_geometry)(geom);
+        }
+        Ok(())
     }
 
     fn error(&self, what: &str) -> String {
@@ -375,28 +574,6 @@ impl EmbreeAccel {
     }
 }
 
-/// The nearest sphere or disk hit before `triangle`'s (a tie keeps the triangle), else
-/// `triangle`. Out of line: the mesh-only path, inlined into the renderer's loop, stays small.
-#[inline(never)]
-fn nearer_analytic(
-    analytic: &Accel,
-    shapes: &[Shape],
-    ray: &Ray,
-    triangle: Option<PreliminaryHit>,
-) -> Option<PreliminaryHit> {
-    let nearer = match &triangle {
-        Some(h) => Ray { tmax: h.t, ..*ray },
-        None => *ray,
-    };
-    analytic.intersect(shapes, &nearer).or(triangle)
-}
-
-/// Whether a sphere or disk blocks `ray` (out of line, as [`nearer_analytic`]).
-#[inline(never)]
-fn analytic_occludes(analytic: &Accel, shapes: &[Shape], ray: &Ray) -> bool {
-    analytic.occluded(shapes, ray)
-}
-
 /// Whether Embree may be given `ray`: a finite origin and direction and a non-empty interval
 /// starting at or after 0 (its queries are undefined otherwise; such a ray hits nothing).
 #[inline]
@@ -421,15 +598,9 @@ fn rtc_ray(ray: &Ray) -> RtcRay {
 }
 
 impl Intersector for EmbreeAccel {
-    /// Embree's closest triangle, then the nearest sphere or disk before it (a tie keeps the
-    /// triangle).
-    #[inline(always)]
-    fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
-        let triangle = if self.triangles > 0 { self.closest(ray, None) } else { None };
-        match &self.analytic_bvh {
-            None => triangle,
-            Some(analytic) => nearer_analytic(analytic, shapes, ray, triangle),
-        }
+    #[inline]
+    fn intersect(&self, _shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
+        self.closest(ray, None)
     }
 
     fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
@@ -440,14 +611,9 @@ impl Intersector for EmbreeAccel {
         }
     }
 
-    #[inline(always)]
-    fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
-        if let Some(analytic) = &self.analytic_bvh {
-            if analytic_occludes(analytic, shapes, ray) {
-                return true;
-            }
-        }
-        if self.triangles == 0 || !valid(ray) {
+    #[inline]
+    fn occluded(&self, _shapes: &[Shape], ray: &Ray) -> bool {
+        if !valid(ray) {
             return false;
         }
         let mut r = rtc_ray(ray);
@@ -459,9 +625,6 @@ impl Intersector for EmbreeAccel {
     }
 
     fn describe(&self) -> String {
-        match &self.analytic_bvh {
-            Some(a) => format!("Embree {} ({} triangles) and {}", self.api.version, self.triangles, a.describe()),
-            None => format!("Embree {} ({} triangles)", self.api.version, self.triangles),
-        }
+        format!("Embree {} ({} triangles)", self.api.version, self.triangles)
     }
 }
