@@ -1,6 +1,9 @@
 //! Ray queries alone, on each backend: closest-hit and occlusion queries of every camera ray of
-//! each reference scene (256 × 256 rays per iteration), reported as rays per second; `bvh` is the
-//! built-in BVH, `embree` Embree 3 where its library loads (`scripts/install-embree.sh`).
+//! each reference scene (256 × 256 rays per iteration), and of as many incoherent rays leaving
+//! points along those (`bounce_*`, as secondary and shadow rays do), reported as rays per second;
+//! `bvh` is the built-in BVH, `embree` Embree 3 where its library loads
+//! (`scripts/install-embree.sh`). Queries alone answer what whole renders on this host cannot
+//! tell apart from its drift: a change of a few per cent in how rays are traced.
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use glam::Vec2;
@@ -17,12 +20,25 @@ fn bvh(c: &mut Criterion) {
         Ok(_) => backends.push(("embree", Backend::Embree)),
         Err(e) => eprintln!("embree: not measured: {e}"),
     }
-    for name in ["cbox", "textured_mesh"] {
+    for name in ["cbox", "textured_mesh", "dielectrics", "roughconductors"] {
         let scene = render::loader::load_file(&refs.join(format!("{name}.xml")), &[]).expect("scene loads");
         let (w, h) = (scene.camera.width, scene.camera.height);
         let rays: Vec<_> = (0..h)
             .flat_map(|y| (0..w).map(move |x| Vec2::new(x as f32 + 0.5, y as f32 + 0.5)))
             .map(|p| scene.camera.generate_ray(p).ray)
+            .collect();
+        // Secondary-like rays: from each camera ray's first hit (or a point along it) in a
+        // scrambled direction.
+        let bounce: Vec<_> = rays
+            .iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let o = r.o + r.d * (1.0 + (k % 7) as f32 * 0.3);
+                let a = k as f32 * 2.399_963;
+                let z = 1.0 - 2.0 * ((k * 37 % 1000) as f32 + 0.5) / 1000.0;
+                let s = (1.0 - z * z).sqrt();
+                render::geometry::Ray::new(o, glam::Vec3::new(s * a.cos(), s * a.sin(), z))
+            })
             .collect();
         group.throughput(Throughput::Elements(rays.len() as u64));
         for (label, backend) in &backends {
@@ -32,6 +48,12 @@ fn bvh(c: &mut Criterion) {
             });
             group.bench_function(format!("{name}/{label}/occluded"), |b| {
                 b.iter(|| rays.iter().filter(|r| accel.occluded(&scene.shapes, r)).count())
+            });
+            group.bench_function(format!("{name}/{label}/bounce_closest"), |b| {
+                b.iter(|| bounce.iter().filter(|r| accel.intersect(&scene.shapes, r).is_some()).count())
+            });
+            group.bench_function(format!("{name}/{label}/bounce_occluded"), |b| {
+                b.iter(|| bounce.iter().filter(|r| accel.occluded(&scene.shapes, r)).count())
             });
         }
     }
