@@ -523,12 +523,31 @@ mod tests {
     use super::*;
     use std::path::PathBuf;
 
-    fn temp_file(name: &str, contents: &[u8]) -> PathBuf {
-        let dir = std::env::temp_dir().join(format!("tessera_mesh_tests_{}", std::process::id()));
+    /// A file written for one test, in a folder of its own that goes when the test is done.
+    struct TempFile(PathBuf);
+
+    impl std::ops::Deref for TempFile {
+        type Target = Path;
+        fn deref(&self) -> &Path {
+            &self.0
+        }
+    }
+
+    impl Drop for TempFile {
+        fn drop(&mut self) {
+            if let Some(dir) = self.0.parent() {
+                let _ = std::fs::remove_dir_all(dir);
+            }
+        }
+    }
+
+    /// Writes `contents` as `name` (every test names its own file) in a folder of its own.
+    fn temp_file(name: &str, contents: &[u8]) -> TempFile {
+        let dir = std::env::temp_dir().join(format!("tessera_mesh_tests_{}_{name}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let p = dir.join(name);
         std::fs::write(&p, contents).unwrap();
-        p
+        TempFile(p)
     }
 
     /// The triangle corners as positions, to compare meshes independent of vertex order.

@@ -338,12 +338,14 @@ mod tests {
     /// Loads `file` (written as `name`) and returns the error and how much the process's peak
     /// resident memory grew meanwhile (0 where /proc/self/status is not there).
     fn exr_load_error(name: &str, file: &[u8]) -> (String, u64) {
-        let dir = std::env::temp_dir().join(format!("tessera_texture_tests_{}", std::process::id()));
+        // A folder per file (every test names its own), removed once read.
+        let dir = std::env::temp_dir().join(format!("tessera_texture_tests_{}_{name}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join(name);
         std::fs::write(&path, file).unwrap();
         let before = peak_rss_bytes();
         let e = Bitmap::load(&path, false).expect_err("a bad EXR must be refused").to_string();
+        let _ = std::fs::remove_dir_all(&dir);
         let grew = match (before, peak_rss_bytes()) {
             (Some(a), Some(b)) => b.saturating_sub(a),
             _ => 0,

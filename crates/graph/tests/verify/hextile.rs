@@ -583,8 +583,7 @@ fn finite_for_every_footprint() {
 /// by zero there): the node falls back to the barycentric weights and stays finite.
 #[test]
 fn black_texture_full_contrast_is_finite() {
-    let dir = std::env::temp_dir().join(format!("graph-hextile-black-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::common::TestDir::new("hextile-black");
     let path = dir.join("black.png");
     image::RgbImage::from_pixel(4, 4, image::Rgb([0, 0, 0])).save(&path).unwrap();
     let g = graph_of(&format!(
@@ -605,8 +604,7 @@ fn black_texture_full_contrast_is_finite() {
 /// A document naming a missing file fails to load with the file and line of the input.
 #[test]
 fn missing_file_names_document_and_line() {
-    let dir = std::env::temp_dir().join(format!("graph-hextile-missing-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = crate::common::TestDir::new("hextile-missing");
     let path = dir.join("missing.mtlx");
     let text = "<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n  <nodegraph name=\"g\">\n    <hextiledimage name=\"h\" type=\"color3\">\n      <input name=\"file\" type=\"filename\" value=\"no_such_texture.png\"/>\n    </hextiledimage>\n    <output name=\"out\" type=\"color3\" nodename=\"h\"/>\n  </nodegraph>\n</materialx>\n";
     std::fs::write(&path, text).unwrap();

@@ -7,12 +7,9 @@ use glam::Vec2;
 use graph::{Document, EvalScratch, Footprint, LoadError, LoadErrorKind, LoadOptions, MaterialSource};
 use std::path::{Path, PathBuf};
 
-/// A fresh folder for one test's files.
-fn dir(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("graph-features-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+/// A fresh folder for one test's files, removed when the test is done.
+fn dir(name: &str) -> crate::common::TestDir {
+    crate::common::TestDir::new(&format!("features-{name}"))
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

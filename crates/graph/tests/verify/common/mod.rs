@@ -3,6 +3,33 @@
 
 use std::path::{Path, PathBuf};
 
+/// A folder for one test's files, removed with them when the test is done (so that test runs
+/// leave nothing behind in the temporary directory).
+pub struct TestDir(PathBuf);
+
+impl TestDir {
+    /// A fresh folder named after the test (and the process, so parallel runs keep apart).
+    pub fn new(name: &str) -> TestDir {
+        let d = std::env::temp_dir().join(format!("graph-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        TestDir(d)
+    }
+}
+
+impl std::ops::Deref for TestDir {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TestDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
 /// `shared/` beside the workspace root.
 pub fn shared() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../shared")
