@@ -116,8 +116,8 @@ mod perlin2 {
         }
     }
 
-    /// Against the full tail, what summing over ±`tail`·σₑ leaves out of 4000 damped octaves
-    /// values at σₑ (isotropic and anisotropic): the worst difference, the values' RMS and the
+    /// Against the full tail, what summing over ±`tail`·σₑ leaves out of the values at σₑ of 4000
+    /// damped octaves (isotropic and anisotropic): the worst difference, the values' RMS and the
     /// corners the shorter sums visit on average.
     fn damped_tail_error(tail: f64) -> (f64, f64, f64) {
         let (mut worst, mut sq, mut corners) = (0.0f64, 0.0, 0u64);
