@@ -614,5 +614,6 @@ mod tests {
             let f = g.eval_output(out, &Footprint::isotropic(Vec2::new(0.3, 0.6), 50.0), &mut scratch);
             assert!((f.ch[0].mean - 0.5).abs() < 1e-3 && (f.ch[2].mean - 0.5).abs() < 1e-3);
         }
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
