@@ -3,9 +3,20 @@
 use graph::{BuildError, Document, LoadError, LoadErrorKind};
 use std::path::PathBuf;
 
+/// The folder a test's document `name` is written to (one per document, so that no two tests
+/// share one), fresh.
+fn folder(name: &str) -> crate::common::TestDir {
+    crate::common::TestDir::new(&format!("errors-{name}"))
+}
+
+/// Writes `body` as document `name` in a folder of its own and loads it, expecting an error;
+/// the folder goes once it is loaded (the error keeps the path).
 fn load(name: &str, body: &str) -> (PathBuf, LoadError) {
-    let dir = std::env::temp_dir().join(format!("graph-errors-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    load_in(&folder(name), name, body)
+}
+
+/// [`load`] in `dir`, which may hold files the document refers to.
+fn load_in(dir: &std::path::Path, name: &str, body: &str) -> (PathBuf, LoadError) {
     let path = dir.join(name);
     let text = format!("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n{body}\n</materialx>\n");
     std::fs::write(&path, text).unwrap();
@@ -135,7 +146,7 @@ fn node_graphs_multiplying_each_other_are_refused() {
     assert_eq!(e.location.file, p);
     assert!(e.location.line > 0, "{e}");
     assert!(e.to_string().contains(&format!("more than {} nodes", graph::MAX_NODES)), "{e}");
-    let dir = std::env::temp_dir().join(format!("graph-errors-{}", std::process::id()));
+    let dir = folder("thousand.mtlx");
     let ok = dir.join("thousand.mtlx");
     std::fs::write(&ok, format!("<?xml version=\"1.0\"?>\n<materialx version=\"1.39\">\n{}\n</materialx>\n", doc(3)))
         .unwrap();
@@ -219,8 +230,7 @@ fn images_claiming_huge_sizes_are_refused() {
         c.extend_from_slice(&(!crc).to_be_bytes());
         c
     }
-    let dir = std::env::temp_dir().join(format!("graph-errors-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
+    let dir = folder("hugeimage.mtlx");
     let mut ihdr = 65536u32.to_be_bytes().to_vec();
     ihdr.extend_from_slice(&65536u32.to_be_bytes());
     ihdr.extend_from_slice(&[8, 6, 0, 0, 0]);
@@ -229,7 +239,8 @@ fn images_claiming_huge_sizes_are_refused() {
     png.extend(chunk(b"IDAT", &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01]));
     png.extend(chunk(b"IEND", &[]));
     std::fs::write(dir.join("huge.png"), png).unwrap();
-    let (p, e) = load(
+    let (p, e) = load_in(
+        &dir,
         "hugeimage.mtlx",
         "<nodegraph name=\"g\">\n  <image name=\"i\" type=\"color3\">\n    \
          <input name=\"file\" type=\"filename\" value=\"huge.png\"/>\n  </image>\n  \
