@@ -864,7 +864,6 @@ mod tests {
         assert!(tiny.stats().peak_bytes <= tiny.config().budget_bytes as u64);
     }
 
-    /// Evicted tiles still read by a thread keep counting until that thread lets them go.
     /// The micro-cache's slots spread a render's working set: the tiles of three textures'
     /// coarse levels (8 × 8, 4 × 4 and 2 × 2 tiles each) land in about as many distinct slots of
     /// 256 as keys thrown at random would (135 expected for 252 keys), and always in range.
@@ -891,6 +890,7 @@ mod tests {
         assert!((0..8u64).map(|c| micro_slot(c, &k, 256)).collect::<std::collections::HashSet<_>>().len() > 4);
     }
 
+    /// Evicted tiles still read by a thread keep counting until that thread lets them go.
     #[test]
     fn micro_cache_releases_evicted_tiles() {
         let (c, id) = cache(1, 4);

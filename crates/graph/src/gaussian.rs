@@ -51,7 +51,8 @@ const ERFC_RATIONAL_LIMIT: f64 = 0.84375;
 /// `f32` after.
 #[inline]
 pub fn erfc(x: f64) -> f64 {
-    if x.abs() < ERFC_RATIONAL_LIMIT || x.is_nan() {
+    // NaN fails the comparison and goes to the C library, whose erfc(NaN) is NaN.
+    if x.abs() < ERFC_RATIONAL_LIMIT {
         libm::erfc(x)
     } else {
         // SAFETY: `erfc` is a pure function of one double with no preconditions.
