@@ -449,7 +449,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
             *throughput *= o / p;
             pdf = p;
         }
-        Crossing::Scatter { pdf, shaded: Some(shade_bsdf(material, si, &ctx)) }
+        Crossing::Scatter { pdf, shaded: Some((material.bsdf.at(&ctx), shading_frame(material, si, &ctx))) }
     }
 
     /// The light of `emitter` (the hit shape's, if it has one) met by chance at `si` along `d`,
@@ -500,13 +500,6 @@ fn event_of(bs: &BsdfSample) -> Event {
         (LobeKind::Diffuse, false) => Event::Diffuse,
         _ => Event::Reflect,
     }
-}
-
-/// The material's BSDF at a hit and the shading frame it is evaluated in (bent by a
-/// graph-driven normal).
-#[inline]
-fn shade_bsdf(material: &Material, si: &SurfaceInteraction, ctx: &ShadeContext) -> (Bsdf, Frame) {
-    (material.bsdf.at(ctx), shading_frame(material, si, ctx))
 }
 
 /// The shading frame a material's BSDF is evaluated in at a hit: the surface's, bent by a
