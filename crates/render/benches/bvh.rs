@@ -15,7 +15,7 @@ fn bvh(c: &mut Criterion) {
     let refs = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../../shared/refs/scenes");
     let mut group = c.benchmark_group("bvh");
     group.sample_size(20);
-    let mut backends = vec![("bvh", Backend::Bvh)];
+    let mut backends = vec![("bvh", Backend::Bvh), ("exhaustive", Backend::Exhaustive)];
     match render::embree::available() {
         Ok(_) => backends.push(("embree", Backend::Embree)),
         Err(e) => eprintln!("embree: not measured: {e}"),
@@ -42,6 +42,11 @@ fn bvh(c: &mut Criterion) {
             .collect();
         group.throughput(Throughput::Elements(rays.len() as u64));
         for (label, backend) in &backends {
+            // Testing every primitive of a large mesh says nothing: small scenes only.
+            let primitives = render::exhaustive::ExhaustiveAccel::build(&scene.shapes).primitives();
+            if *backend == Backend::Exhaustive && primitives > 2 * render::exhaustive::SMALL_SCENE {
+                continue;
+            }
             let accel = build_intersector(&scene.shapes, *backend).expect("backend builds");
             group.bench_function(format!("{name}/{label}/closest"), |b| {
                 b.iter(|| rays.iter().filter(|r| accel.intersect(&scene.shapes, r).is_some()).count())

@@ -1,7 +1,9 @@
-//! Which ray-query backend a scene's [`Intersector`] is: the built-in BVH ([`Accel`]) or
-//! Embree ([`crate::embree`]), chosen by `--accel` (auto by default).
+//! Which ray-query backend a scene's [`Intersector`] is: the built-in BVH ([`Accel`]), Embree
+//! ([`crate::embree`]) or, for scenes of few primitives, a test of every one
+//! ([`crate::exhaustive`]), chosen by `--accel` (auto by default).
 
 use crate::embree::EmbreeAccel;
+use crate::exhaustive::{ExhaustiveAccel, SMALL_SCENE, SMALL_SCENE_TRIANGLES};
 use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape};
 
 /// Which ray-query backend scenes are built with ([`build_intersector`]).
@@ -14,6 +16,8 @@ pub enum Backend {
     Bvh,
     /// Embree ([`crate::embree`]); an error where it cannot be loaded.
     Embree,
+    /// Every primitive tested ([`ExhaustiveAccel`]), whatever the scene's size.
+    Exhaustive,
 }
 
 impl Backend {
@@ -23,6 +27,7 @@ impl Backend {
             Backend::Auto => "auto",
             Backend::Bvh => "bvh",
             Backend::Embree => "embree",
+            Backend::Exhaustive => "exhaustive",
         }
     }
 }
@@ -34,12 +39,13 @@ impl std::str::FromStr for Backend {
             "auto" => Ok(Backend::Auto),
             "bvh" => Ok(Backend::Bvh),
             "embree" => Ok(Backend::Embree),
-            _ => Err(format!("unknown ray-query backend '{s}' (expected auto, bvh or embree)")),
+            "exhaustive" => Ok(Backend::Exhaustive),
+            _ => Err(format!("unknown ray-query backend '{s}' (expected auto, bvh, embree or exhaustive)")),
         }
     }
 }
 
-/// The backend scenes loaded from now on are built with (0 auto, 1 bvh, 2 embree); set once by
+/// The backend scenes loaded from now on are built with (0 auto, 1 bvh, 2 embree, 3 exhaustive); set once by
 /// the command line's `--accel`, read by the loader.
 static BACKEND: std::sync::atomic::AtomicU8 = std::sync::atomic::AtomicU8::new(0);
 
@@ -49,6 +55,7 @@ pub fn set_backend(backend: Backend) {
         Backend::Auto => 0,
         Backend::Bvh => 1,
         Backend::Embree => 2,
+        Backend::Exhaustive => 3,
     };
     BACKEND.store(code, std::sync::atomic::Ordering::Relaxed);
 }
@@ -58,6 +65,7 @@ pub fn backend() -> Backend {
     match BACKEND.load(std::sync::atomic::Ordering::Relaxed) {
         1 => Backend::Bvh,
         2 => Backend::Embree,
+        3 => Backend::Exhaustive,
         _ => Backend::Auto,
     }
 }
@@ -71,6 +79,8 @@ pub enum SceneAccel {
     Bvh(Accel),
     /// Embree.
     Embree(EmbreeAccel),
+    /// Every primitive tested.
+    Exhaustive(ExhaustiveAccel),
 }
 
 impl Intersector for SceneAccel {
@@ -79,6 +89,7 @@ impl Intersector for SceneAccel {
         match self {
             SceneAccel::Bvh(a) => a.intersect(shapes, ray),
             SceneAccel::Embree(a) => a.intersect(shapes, ray),
+            SceneAccel::Exhaustive(a) => a.intersect(shapes, ray),
         }
     }
 
@@ -87,6 +98,7 @@ impl Intersector for SceneAccel {
         match self {
             SceneAccel::Bvh(a) => a.occluded(shapes, ray),
             SceneAccel::Embree(a) => a.occluded(shapes, ray),
+            SceneAccel::Exhaustive(a) => a.occluded(shapes, ray),
         }
     }
 
@@ -94,6 +106,7 @@ impl Intersector for SceneAccel {
         match self {
             SceneAccel::Bvh(a) => a.intersect_shape(shapes, ray, shape),
             SceneAccel::Embree(a) => a.intersect_shape(shapes, ray, shape),
+            SceneAccel::Exhaustive(a) => a.intersect_shape(shapes, ray, shape),
         }
     }
 
@@ -101,21 +114,25 @@ impl Intersector for SceneAccel {
         match self {
             SceneAccel::Bvh(a) => a.describe(),
             SceneAccel::Embree(a) => a.describe(),
+            SceneAccel::Exhaustive(a) => a.describe(),
         }
     }
 }
 
-/// The ray queries over `shapes` by `backend`. With [`Backend::Auto`], Embree where its library
-/// loads (it is the faster on every scene measured: triangles alone, spheres alone, both), else
-/// the built-in BVH (also when Embree fails, with a warning on stderr); an error when
-/// [`Backend::Embree`] is asked for and cannot be had, or when the built-in BVH cannot hold the
-/// scene.
+/// The ray queries over `shapes` by `backend`. With [`Backend::Auto`]: a test of every
+/// primitive for scenes of at most [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`]
+/// primitives (faster there than either hierarchy, in renders), else Embree where its library loads (the faster
+/// hierarchy on every scene measured: triangles alone, spheres alone, both), else the built-in
+/// BVH (also when Embree fails, with a warning on stderr); an error when [`Backend::Embree`] is
+/// asked for and cannot be had, or when the built-in BVH cannot hold the scene.
 pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Result<SceneAccel, String> {
     match backend {
         Backend::Bvh => Ok(SceneAccel::Bvh(Accel::build(shapes)?)),
         Backend::Embree => EmbreeAccel::build(shapes)
             .map(SceneAccel::Embree)
             .map_err(|e| format!("--accel embree: {e} (scripts/install-embree.sh installs it)")),
+        Backend::Exhaustive => Ok(SceneAccel::Exhaustive(ExhaustiveAccel::build(shapes))),
+        Backend::Auto if small(shapes) => Ok(SceneAccel::Exhaustive(ExhaustiveAccel::build(shapes))),
         Backend::Auto if crate::embree::available().is_ok() => match EmbreeAccel::build(shapes) {
             Ok(a) => Ok(SceneAccel::Embree(a)),
             Err(e) => {
@@ -125,4 +142,21 @@ pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Res
         },
         Backend::Auto => Ok(SceneAccel::Bvh(Accel::build(shapes)?)),
     }
+}
+
+/// Whether `shapes` hold at most [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`]
+/// primitives in all.
+fn small(shapes: &[Shape]) -> bool {
+    let (mut triangles, mut all) = (0, 0);
+    for s in shapes {
+        let n = match &s.geometry {
+            crate::geometry::ShapeGeometry::Mesh { mesh, .. } => {
+                triangles += mesh.indices.len();
+                mesh.indices.len()
+            }
+            _ => 1,
+        };
+        all += n;
+    }
+    triangles <= SMALL_SCENE_TRIANGLES && all <= SMALL_SCENE
 }

@@ -26,6 +26,7 @@ pub mod camera;
 pub mod embree;
 pub mod emitter;
 pub mod error;
+pub mod exhaustive;
 pub mod film;
 pub mod geometry;
 pub mod integrator;

@@ -693,7 +693,8 @@ fn inputs_built_to_exhaust_memory_stay_small() {
 
 /// `--accel`: each backend renders the scene and says which traced the rays; without the
 /// library (`TESSERA_EMBREE` naming a file that is not there) `embree` is an error naming the
-/// file and the install script, and `auto` falls back to the built-in BVH.
+/// file and the install script, and `auto` falls back to the built-in BVH; `auto` tests every
+/// primitive of a small scene.
 #[test]
 fn accel_backends_render_and_say_which_traced_the_rays() {
     let dir = temp_dir("accel");
@@ -729,6 +730,20 @@ fn accel_backends_render_and_say_which_traced_the_rays() {
     let out = render("auto", Some(missing));
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(accel_of("auto").starts_with("built-in BVH"));
+
+    let out = render("exhaustive", None);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(accel_of("exhaustive").starts_with("every primitive tested (36 triangles"), "{}", accel_of("exhaustive"));
+    // A scene of few primitives (2 triangles, 3 spheres) is tested exhaustively by default.
+    let out = tessera()
+        .current_dir(&dir)
+        .arg("render")
+        .arg(refs_scene("dielectrics.xml"))
+        .args(["--spp", "1", "--out", "small.exr", "--stats-json", "small.json"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(accel_of("small").starts_with("every primitive tested (2 triangles"), "{}", accel_of("small"));
 
     if render::embree::available().is_ok() {
         let out = render("embree", None);

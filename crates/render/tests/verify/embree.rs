@@ -1,7 +1,8 @@
 //! Embree against the built-in BVH and against brute force: the same closest hits, occlusion
 //! answers and single-shape queries on every reference scene and on random triangle soups with
 //! spheres and disks among them. Without the library (`scripts/install-embree.sh`) each test
-//! says it was skipped; `.ci/run` installs it.
+//! says it was skipped; `.ci/run` installs it. The helpers serve the other backends' tests too
+//! (`exhaustive.rs`).
 
 use glam::{Affine3A, Mat3, Quat, Vec3};
 use render::embree::{available, EmbreeAccel};
@@ -20,7 +21,7 @@ fn embree_or_skip(test: &str) -> bool {
     }
 }
 
-fn unit(rng: &mut Rng) -> Vec3 {
+pub(crate) fn unit(rng: &mut Rng) -> Vec3 {
     loop {
         let v = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 2.0 - 1.0;
         let l = v.length_squared();
@@ -32,7 +33,7 @@ fn unit(rng: &mut Rng) -> Vec3 {
 
 /// Random rays through the scene's bounds (origins in a box 1.5× as large), some with a finite
 /// far end.
-fn rays(min: Vec3, max: Vec3, n: usize, seed: u64) -> Vec<Ray> {
+pub(crate) fn rays(min: Vec3, max: Vec3, n: usize, seed: u64) -> Vec<Ray> {
     let mut rng = Rng::new(seed, 0);
     let (c, h) = ((min + max) * 0.5, (max - min) * 0.75 + 1e-3);
     (0..n)
@@ -52,7 +53,12 @@ fn rays(min: Vec3, max: Vec3, n: usize, seed: u64) -> Vec<Ray> {
 /// ray exactly through a shared edge (a pixel-centre ray on a square's diagonal in a symmetric
 /// view, say) can slip between the two triangles in either, so a few in a thousand are allowed;
 /// a wrong convention (barycentrics, ids, the interval) disagrees on many.
-fn disagreements(shapes: &[Shape], a: &dyn Intersector, b: &dyn Intersector, rays: &[Ray]) -> (usize, usize, usize) {
+pub(crate) fn disagreements(
+    shapes: &[Shape],
+    a: &dyn Intersector,
+    b: &dyn Intersector,
+    rays: &[Ray],
+) -> (usize, usize, usize) {
     let close = |x: &PreliminaryHit, y: &PreliminaryHit| (x.t - y.t).abs() <= 1e-4 * (1.0 + x.t.abs());
     let (mut hits, mut occl, mut hit_count) = (0, 0, 0);
     for r in rays {
@@ -115,7 +121,7 @@ fn embree_agrees_with_the_built_in_bvh_on_every_reference_scene() {
     }
 }
 
-fn mesh_shape(mesh: TriangleMesh) -> Shape {
+pub(crate) fn mesh_shape(mesh: TriangleMesh) -> Shape {
     let area = render::geometry::mesh_area_distribution(&mesh).unwrap();
     Shape {
         geometry: ShapeGeometry::mesh(mesh, area),
@@ -129,7 +135,7 @@ fn mesh_shape(mesh: TriangleMesh) -> Shape {
 
 /// The nearest triangle hit by plain enumeration, in double precision (independent of both
 /// backends' tests): (t, shape, triangle, barycentrics).
-fn brute_force(shapes: &[Shape], r: &Ray) -> Option<(f64, u32, u32, f64, f64)> {
+pub(crate) fn brute_force(shapes: &[Shape], r: &Ray) -> Option<(f64, u32, u32, f64, f64)> {
     let (o, d) = (r.o.as_dvec3(), r.d.as_dvec3());
     let mut best: Option<(f64, u32, u32, f64, f64)> = None;
     for (si, s) in shapes.iter().enumerate() {
@@ -156,6 +162,46 @@ fn brute_force(shapes: &[Shape], r: &Ray) -> Option<(f64, u32, u32, f64, f64)> {
     best
 }
 
+/// Soup number `soup`: two meshes of `lo..lo + spread` random triangles of mixed sizes in
+/// [−2, 2]³, and a sphere and a disk among them.
+pub(crate) fn soup_shapes(rng: &mut Rng, soup: u64, lo: usize, spread: usize) -> Vec<Shape> {
+    let mut shapes = Vec::new();
+    for _ in 0..2 {
+        let n = lo + (rng.next_f32() * spread as f32) as usize;
+        let mut positions = Vec::new();
+        let mut indices = Vec::new();
+        for k in 0..n {
+            let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
+            let size = 0.05 + rng.next_f32().powi(2);
+            for _ in 0..3 {
+                positions.push(c + unit(rng) * size);
+            }
+            let b = 3 * k as u32;
+            indices.push([b, b + 1, b + 2]);
+        }
+        shapes.push(mesh_shape(TriangleMesh { positions, normals: None, uvs: None, indices }));
+    }
+    shapes.push(Shape {
+        geometry: ShapeGeometry::Sphere { center: Vec3::new(0.3, -0.2, 0.1), radius: 0.7, rotation: Mat3::IDENTITY },
+        ..mesh_shape(render::mesh::rectangle_mesh())
+    });
+    let to_world = Affine3A::from_scale_rotation_translation(
+        Vec3::splat(0.8),
+        Quat::from_rotation_x(0.7 * soup as f32),
+        Vec3::new(-0.5, 0.4, 0.2),
+    );
+    shapes.push(Shape {
+        geometry: ShapeGeometry::Disk {
+            to_world,
+            to_object: to_world.inverse(),
+            normal: to_world.transform_vector3(Vec3::Z).normalize(),
+            area: 0.64 * std::f32::consts::PI,
+        },
+        ..mesh_shape(render::mesh::rectangle_mesh())
+    });
+    shapes
+}
+
 #[test]
 fn embree_finds_the_brute_force_nearest_triangle_in_random_soups() {
     if !embree_or_skip("embree_finds_the_brute_force_nearest_triangle_in_random_soups") {
@@ -163,45 +209,7 @@ fn embree_finds_the_brute_force_nearest_triangle_in_random_soups() {
     }
     let mut rng = Rng::new(11, 3);
     for soup in 0..6 {
-        // Two meshes of random triangles of mixed sizes, and a sphere and a disk among them.
-        let mut shapes = Vec::new();
-        for _ in 0..2 {
-            let n = 50 + (rng.next_f32() * 300.0) as usize;
-            let mut positions = Vec::new();
-            let mut indices = Vec::new();
-            for k in 0..n {
-                let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 4.0 - 2.0;
-                let size = 0.05 + rng.next_f32().powi(2);
-                for _ in 0..3 {
-                    positions.push(c + unit(&mut rng) * size);
-                }
-                let b = 3 * k as u32;
-                indices.push([b, b + 1, b + 2]);
-            }
-            shapes.push(mesh_shape(TriangleMesh { positions, normals: None, uvs: None, indices }));
-        }
-        shapes.push(Shape {
-            geometry: ShapeGeometry::Sphere {
-                center: Vec3::new(0.3, -0.2, 0.1),
-                radius: 0.7,
-                rotation: Mat3::IDENTITY,
-            },
-            ..mesh_shape(render::mesh::rectangle_mesh())
-        });
-        let to_world = Affine3A::from_scale_rotation_translation(
-            Vec3::splat(0.8),
-            Quat::from_rotation_x(0.7 * soup as f32),
-            Vec3::new(-0.5, 0.4, 0.2),
-        );
-        shapes.push(Shape {
-            geometry: ShapeGeometry::Disk {
-                to_world,
-                to_object: to_world.inverse(),
-                normal: to_world.transform_vector3(Vec3::Z).normalize(),
-                area: 0.64 * std::f32::consts::PI,
-            },
-            ..mesh_shape(render::mesh::rectangle_mesh())
-        });
+        let shapes = soup_shapes(&mut rng, soup, 50, 300);
         let bvh = Accel::build(&shapes).unwrap();
         let embree = EmbreeAccel::build(&shapes).unwrap();
         let all = rays(Vec3::splat(-2.0), Vec3::splat(2.0), 4000, 100 + soup);

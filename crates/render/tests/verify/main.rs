@@ -6,6 +6,7 @@ mod analytic;
 mod bad_input;
 mod caching;
 mod embree;
+mod exhaustive;
 mod footprint_mc;
 mod mtlx;
 mod opacity;
