@@ -21,18 +21,18 @@ use glam::Vec2;
 const LANES: usize = 8;
 
 /// Most triangles a scene may have for [`crate::accel::Backend::Auto`] to test them all instead
-/// of building a hierarchy (four blocks), and most primitives of any kind ([`SMALL_SCENE`]).
-/// Measured against Embree, the binaries' backends in round robin: the free-texture renders of
+/// of building a hierarchy (six blocks), and most primitives of any kind ([`SMALL_SCENE`]).
+/// Measured against Embree, the backends of one binary in round robin: the Cornell box (36
+/// triangles) renders 10–12 % faster, the same box with one more small cube (48) 4 % faster,
+/// with two (60) 4 % slower and with four (84) 10 % slower; the free-texture renders of
 /// brick_moss (26 triangles and a sphere) 8–15 % faster, marble (6 and 4) 10–12 %, dielectrics
-/// (2 and 3) 10–14 %, roughconductors (6 and 3) 9 %; the Cornell box (36 triangles) 2–5 %
-/// faster on one thread and 0–4 % slower on two, the same box with one more cube (48) 3 %
-/// slower, with two (60) 10 %. A sphere or disk costs Embree a callback into our own test, which
-/// here is called directly.
-pub const SMALL_SCENE_TRIANGLES: usize = 32;
+/// (2 and 3) 10–14 %, roughconductors (6 and 3) 9 %. A sphere or disk costs Embree a callback
+/// into our own test, which here is called directly.
+pub const SMALL_SCENE_TRIANGLES: usize = 48;
 
 /// Most primitives (triangles, spheres and disks) a scene may have for
 /// [`crate::accel::Backend::Auto`] to test them all ([`SMALL_SCENE_TRIANGLES`]).
-pub const SMALL_SCENE: usize = 40;
+pub const SMALL_SCENE: usize = 56;
 
 /// Eight triangles: a corner and the two edges from it, one array per coordinate. Lanes past the
 /// scene's last triangle have zero edges, which the test rejects (zero determinant).
@@ -213,36 +213,58 @@ fn block_hits(b: &Block, o: [f32; 3], d: [f32; 3], tmin: f32, tmax: f32) -> ([f3
 // The loops below index instead of using iterator adapters: an adapter is a generic function
 // of its own, which the compiler may leave out of line, and then it is not compiled for AVX2.
 
+/// The smallest of a block's distances, by halving (a chain of eight `f32::min` was a quarter of
+/// a query: each waits for the one before, and NaN-aware minima take a blend each). The
+/// distances are never NaN ([`block_hits`] writes ∞ for every lane that does not hit).
+#[inline(always)]
+fn nearest_of(t: &[f32; LANES]) -> f32 {
+    let mut m = *t;
+    let mut half = LANES / 2;
+    while half > 0 {
+        for k in 0..half {
+            m[k] = if m[k + half] < m[k] { m[k + half] } else { m[k] };
+        }
+        half /= 2;
+    }
+    m[0]
+}
+
 #[inline(always)]
 #[allow(clippy::needless_range_loop)]
 fn closest_in(blocks: &[Block], ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
     let (o, d) = (ray.o.to_array(), ray.d.to_array());
     let mut tmax = ray.tmax;
-    let mut best = None;
+    // The winner so far: its block, lane and barycentrics (the hit is assembled once, at the end).
+    let mut best: Option<(usize, usize, f32, f32)> = None;
     for i in 0..blocks.len() {
         let b = &blocks[i];
-        let (t, u, v) = block_hits(b, o, d, ray.tmin, tmax);
-        let mut nearest = f32::INFINITY;
-        for k in 0..LANES {
-            nearest = nearest.min(t[k]);
+        let (mut t, u, v) = block_hits(b, o, d, ray.tmin, tmax);
+        if let Some(s) = only {
+            for k in 0..LANES {
+                if b.shape[k] != s {
+                    t[k] = f32::INFINITY;
+                }
+            }
         }
+        let nearest = nearest_of(&t);
         if nearest == f32::INFINITY {
             continue;
         }
-        // The first lane at the nearest distance (and on the wanted shape).
-        for k in 0..LANES {
-            let wanted = match only {
-                Some(s) => s == b.shape[k],
-                None => true,
-            };
-            if t[k] < tmax && wanted {
-                tmax = t[k];
-                best =
-                    Some(PreliminaryHit { t: t[k], shape: b.shape[k], index: b.index[k], bary: Vec2::new(u[k], v[k]) });
-            }
+        // The first lane at the nearest distance (`block_hits` kept only lanes nearer than the
+        // winner of earlier blocks: ties go to the first primitive in scene order).
+        let mut k = 0;
+        while k + 1 < LANES && t[k] != nearest {
+            k += 1;
         }
+        tmax = nearest;
+        best = Some((i, k, u[k], v[k]));
     }
-    best
+    best.map(|(i, k, u, v)| PreliminaryHit {
+        t: tmax,
+        shape: blocks[i].shape[k],
+        index: blocks[i].index[k],
+        bary: Vec2::new(u, v),
+    })
 }
 
 #[inline(always)]
@@ -251,11 +273,11 @@ fn any_in(blocks: &[Block], ray: &Ray) -> bool {
     let (o, d) = (ray.o.to_array(), ray.d.to_array());
     for i in 0..blocks.len() {
         let (t, _, _) = block_hits(&blocks[i], o, d, ray.tmin, ray.tmax);
-        let mut nearest = f32::INFINITY;
+        let mut any = 0u32;
         for k in 0..LANES {
-            nearest = nearest.min(t[k]);
+            any |= u32::from(t[k] < f32::INFINITY);
         }
-        if nearest < f32::INFINITY {
+        if any != 0 {
             return true;
         }
     }

@@ -39,7 +39,7 @@ const DEFAULT_SCENE_MTLX: &str = include_str!("../../../scenes/marble.mtlx");
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// What traces rays: auto (every primitive tested in scenes of at most 32 triangles and 40
+    /// What traces rays: auto (every primitive tested in scenes of at most 48 triangles and 56
     /// primitives, else Embree 3 where its library is installed, else the built-in BVH), bvh (the built-in BVH), embree (an error
     /// without it) or exhaustive (every primitive tested, whatever the scene).
     #[arg(long, global = true, default_value = "auto", value_parser = |s: &str| s.parse::<render::accel::Backend>())]
