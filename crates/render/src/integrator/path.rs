@@ -601,21 +601,29 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         // the move's wide loads stalled on the fresh narrow stores that built it (store
         // forwarding, 1.4 % of a Cornell box).
         let built;
+        let bent;
         let (bsdf, frame) = match &shaded {
-            Some((b, f)) => (b, *f),
+            Some((b, f)) => (b, f),
             None => {
                 // Procedural textures are filtered to the vertex's uv footprint (a point without one).
                 let outputs = tracer.material_outputs(material, &si, &here);
                 let ctx = ShadeContext { uv: si.uv, outputs };
                 built = material.bsdf.at(&ctx);
-                (&built, shading_frame(material, &si, &ctx))
+                // A graph-driven shading normal bends the frame the BSDF is evaluated in.
+                let frame = match material.normal_slot {
+                    Some(_) => {
+                        bent = shading_frame(material, &si, &ctx);
+                        &bent
+                    }
+                    None => &si.sh,
+                };
+                (&built, frame)
             }
         };
-        // A graph-driven shading normal bends the frame the BSDF is evaluated in.
-        // `wi` from the frame in registers: read back from `si` right after the store, the
-        // frame's wider loads stalled on its narrower stores (store forwarding; 1.5 % of a
-        // Cornell box).
-        let wi = frame.to_local(-ray.d);
+        // `wi` from the frame where it lies: read from a fresh copy, the frame's loads straddled
+        // the copy's 16-byte stores and stalled (store forwarding; 1.5 % of a Cornell box), as
+        // they did when read back from `si` right after being stored there.
+        let (wi, frame) = (frame.to_local(-ray.d), *frame);
         let mut si = si;
         si.sh = frame;
 
