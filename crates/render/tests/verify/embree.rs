@@ -162,6 +162,47 @@ pub(crate) fn brute_force(shapes: &[Shape], r: &Ray) -> Option<(f64, u32, u32, f
     best
 }
 
+/// The rays on which `accel` does not find the triangle [`brute_force`] enumerates, at the same
+/// point: the soups' triangles share no edges, so a right backend misses none but rays within
+/// rounding of an edge.
+pub(crate) fn enumeration_mismatches(accel: &dyn Intersector, meshes: &[Shape], rays: &[Ray]) -> usize {
+    let mut wrong = 0;
+    for r in rays {
+        match (accel.intersect(meshes, r), brute_force(meshes, r)) {
+            (Some(e), Some(b)) => {
+                let ok = (e.t as f64 - b.0).abs() <= 1e-4 * (1.0 + b.0)
+                    && (e.shape, e.index) == (b.1, b.2)
+                    && (e.bary.x as f64 - b.3).abs() < 1e-3
+                    && (e.bary.y as f64 - b.4).abs() < 1e-3;
+                wrong += usize::from(!ok);
+            }
+            (None, None) => {}
+            _ => wrong += 1,
+        }
+    }
+    wrong
+}
+
+/// Rays a backend cannot take (a NaN or infinite origin or direction, an empty or NaN interval)
+/// hit nothing and are not occluded; a good one hits the unit square; an empty scene hits nothing.
+pub(crate) fn rays_it_cannot_take_hit_nothing(build: &dyn Fn(&[Shape]) -> Box<dyn Intersector>) {
+    let shapes = vec![mesh_shape(render::mesh::rectangle_mesh())];
+    let accel = build(&shapes);
+    let good = Ray::new(Vec3::new(0.2, 0.1, 3.0), -Vec3::Z);
+    assert!(accel.intersect(&shapes, &good).is_some() && accel.occluded(&shapes, &good));
+    for bad in [
+        Ray { o: Vec3::new(f32::NAN, 0.0, 3.0), ..good },
+        Ray { d: Vec3::new(0.0, f32::INFINITY, -1.0), ..good },
+        Ray { tmin: 2.0, tmax: 1.0, ..good },
+        Ray { tmin: f32::NAN, ..good },
+    ] {
+        assert!(accel.intersect(&shapes, &bad).is_none(), "{bad:?}");
+        assert!(!accel.occluded(&shapes, &bad), "{bad:?}");
+    }
+    let empty = build(&[]);
+    assert!(empty.intersect(&[], &good).is_none() && !empty.occluded(&[], &good));
+}
+
 /// Soup number `soup`: two meshes of `lo..lo + spread` random triangles of mixed sizes in
 /// [−2, 2]³, and a sphere and a disk among them.
 pub(crate) fn soup_shapes(rng: &mut Rng, soup: u64, lo: usize, spread: usize) -> Vec<Shape> {
@@ -222,22 +263,7 @@ fn embree_finds_the_brute_force_nearest_triangle_in_random_soups() {
         // Triangle hits against enumeration, with the spheres and disks left out.
         let meshes = &shapes[..2];
         let embree_meshes = EmbreeAccel::build(meshes).unwrap();
-        let mut wrong = 0;
-        for r in &all {
-            let (e, b) = (embree_meshes.intersect(meshes, r), brute_force(meshes, r));
-            match (e, b) {
-                (Some(e), Some(b)) => {
-                    // The soup's triangles share no edges: the same triangle, at the same point.
-                    let ok = (e.t as f64 - b.0).abs() <= 1e-4 * (1.0 + b.0)
-                        && (e.shape, e.index) == (b.1, b.2)
-                        && (e.bary.x as f64 - b.3).abs() < 1e-3
-                        && (e.bary.y as f64 - b.4).abs() < 1e-3;
-                    wrong += usize::from(!ok);
-                }
-                (None, None) => {}
-                _ => wrong += 1,
-            }
-        }
+        let wrong = enumeration_mismatches(&embree_meshes, meshes, &all);
         assert!(wrong * 1000 <= all.len(), "soup {soup}: {wrong} of {} rays differ from enumeration", all.len());
     }
 }
@@ -247,20 +273,5 @@ fn rays_embree_cannot_take_hit_nothing() {
     if !embree_or_skip("rays_embree_cannot_take_hit_nothing") {
         return;
     }
-    let shapes = vec![mesh_shape(render::mesh::rectangle_mesh())];
-    let embree = EmbreeAccel::build(&shapes).unwrap();
-    let good = Ray::new(Vec3::new(0.2, 0.1, 3.0), -Vec3::Z);
-    assert!(embree.intersect(&shapes, &good).is_some() && embree.occluded(&shapes, &good));
-    for bad in [
-        Ray { o: Vec3::new(f32::NAN, 0.0, 3.0), ..good },
-        Ray { d: Vec3::new(0.0, f32::INFINITY, -1.0), ..good },
-        Ray { tmin: 2.0, tmax: 1.0, ..good },
-        Ray { tmin: f32::NAN, ..good },
-    ] {
-        assert!(embree.intersect(&shapes, &bad).is_none(), "{bad:?}");
-        assert!(!embree.occluded(&shapes, &bad), "{bad:?}");
-    }
-    // An empty scene.
-    let empty = EmbreeAccel::build(&[]).unwrap();
-    assert!(empty.intersect(&[], &good).is_none() && !empty.occluded(&[], &good));
+    rays_it_cannot_take_hit_nothing(&|shapes| Box::new(EmbreeAccel::build(shapes).unwrap()));
 }

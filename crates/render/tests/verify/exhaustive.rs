@@ -3,10 +3,10 @@
 //! answers and single-shape queries on every reference scene and on random soups; its AVX2 and
 //! portable code paths bit for bit; and rays it cannot take hit nothing.
 
-use super::embree::{brute_force, disagreements, mesh_shape, rays, soup_shapes};
+use super::embree::{disagreements, enumeration_mismatches, rays, rays_it_cannot_take_hit_nothing, soup_shapes};
 use glam::Vec3;
 use render::exhaustive::ExhaustiveAccel;
-use render::geometry::{Accel, Intersector, Ray};
+use render::geometry::{Accel, Intersector};
 use render::sampling::Rng;
 use std::path::PathBuf;
 
@@ -61,21 +61,7 @@ fn exhaustive_finds_the_enumerated_nearest_triangle_in_random_soups() {
         assert_eq!((hits, occl), (0, 0), "soup {soup}");
         // Triangle hits against enumeration in double precision, the spheres and disks left out.
         let meshes = &shapes[..2];
-        let triangles = ExhaustiveAccel::build(meshes);
-        let mut wrong = 0;
-        for r in &all {
-            match (triangles.intersect(meshes, r), brute_force(meshes, r)) {
-                (Some(e), Some(b)) => {
-                    let ok = (e.t as f64 - b.0).abs() <= 1e-4 * (1.0 + b.0)
-                        && (e.shape, e.index) == (b.1, b.2)
-                        && (e.bary.x as f64 - b.3).abs() < 1e-3
-                        && (e.bary.y as f64 - b.4).abs() < 1e-3;
-                    wrong += usize::from(!ok);
-                }
-                (None, None) => {}
-                _ => wrong += 1,
-            }
-        }
+        let wrong = enumeration_mismatches(&ExhaustiveAccel::build(meshes), meshes, &all);
         assert!(wrong * 1000 <= all.len(), "soup {soup}: {wrong} of {} rays differ from enumeration", all.len());
     }
 }
@@ -105,19 +91,5 @@ fn avx2_and_portable_paths_agree_bit_for_bit() {
 
 #[test]
 fn rays_the_exhaustive_backend_cannot_take_hit_nothing() {
-    let shapes = vec![mesh_shape(render::mesh::rectangle_mesh())];
-    let all_of = ExhaustiveAccel::build(&shapes);
-    let good = Ray::new(Vec3::new(0.2, 0.1, 3.0), -Vec3::Z);
-    assert!(all_of.intersect(&shapes, &good).is_some() && all_of.occluded(&shapes, &good));
-    for bad in [
-        Ray { o: Vec3::new(f32::NAN, 0.0, 3.0), ..good },
-        Ray { d: Vec3::new(0.0, f32::INFINITY, -1.0), ..good },
-        Ray { tmin: 2.0, tmax: 1.0, ..good },
-        Ray { tmin: f32::NAN, ..good },
-    ] {
-        assert!(all_of.intersect(&shapes, &bad).is_none(), "{bad:?}");
-        assert!(!all_of.occluded(&shapes, &bad), "{bad:?}");
-    }
-    let empty = ExhaustiveAccel::build(&[]);
-    assert!(empty.intersect(&[], &good).is_none() && !empty.occluded(&[], &good));
+    rays_it_cannot_take_hit_nothing(&|shapes| Box::new(ExhaustiveAccel::build(shapes)));
 }
