@@ -9,7 +9,8 @@ use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape};
 /// Which ray-query backend scenes are built with ([`build_intersector`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Backend {
-    /// Embree when its library loads, else the built-in BVH.
+    /// Every primitive tested in small scenes ([`build_intersector`] says which), else Embree
+    /// when its library loads, else the built-in BVH.
     #[default]
     Auto,
     /// The built-in BVH ([`Accel`]) always.

@@ -8,8 +8,13 @@
 //! [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`] primitives in all.
 //!
 //! The triangle test is the built-in BVH's (Möller–Trumbore on the same precomputed edges, the
-//! same operations in the same order), so both find the same hits; only ties between primitives
-//! at the same distance may resolve differently (here: the first in scene order). Lanes are
+//! same operations in the same order), so a primitive both report is hit at the same distance,
+//! bit for bit. Where they report different primitives, within rounding of each other, this one
+//! has the nearer (the BVH's rounded boxes can pass over a hit an ulp nearer than another), and
+//! ties go to triangles before spheres and disks, and within each kind to the first in scene
+//! order. Rays
+//! Embree could not take (a NaN or infinite origin or direction, an interval that is empty or
+//! starts below 0) hit nothing, as with Embree. Lanes are
 //! written as plain loops over arrays, which the compiler turns into vector instructions; where
 //! the processor has AVX2 (detected once, at build) the same loops are compiled for it as well.
 //! The arithmetic is identical either way, so the images are.

@@ -235,9 +235,10 @@ struct TriPrim {
     e2: Vec3A,
 }
 
-/// Ray queries against a scene's primitives: the seam behind which a BVH backend sits, the
-/// built-in [`Accel`] (the `obvhs` crate's compressed wide BVH) or Embree
-/// ([`crate::embree::EmbreeAccel`]), chosen by [`crate::accel::build_intersector`].
+/// Ray queries against a scene's primitives: the seam behind which a backend sits, the built-in
+/// [`Accel`] (the `obvhs` crate's compressed wide BVH), Embree ([`crate::embree::EmbreeAccel`])
+/// or, for small scenes, a test of every primitive ([`crate::exhaustive::ExhaustiveAccel`]),
+/// chosen by [`crate::accel::build_intersector`].
 pub trait Intersector: Send + Sync {
     /// The closest hit along `ray`, if any.
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit>;

@@ -183,8 +183,8 @@ pub(crate) fn enumeration_mismatches(accel: &dyn Intersector, meshes: &[Shape], 
     wrong
 }
 
-/// Rays a backend cannot take (a NaN or infinite origin or direction, an empty or NaN interval)
-/// hit nothing and are not occluded; a good one hits the unit square; an empty scene hits nothing.
+/// Rays a backend cannot take (a NaN or infinite origin or direction, an empty or NaN interval,
+/// one that starts below 0) hit nothing and are not occluded; a good one hits the unit square; an empty scene hits nothing.
 pub(crate) fn rays_it_cannot_take_hit_nothing(build: &dyn Fn(&[Shape]) -> Box<dyn Intersector>) {
     let shapes = vec![mesh_shape(render::mesh::rectangle_mesh())];
     let accel = build(&shapes);
@@ -195,6 +195,8 @@ pub(crate) fn rays_it_cannot_take_hit_nothing(build: &dyn Fn(&[Shape]) -> Box<dy
         Ray { d: Vec3::new(0.0, f32::INFINITY, -1.0), ..good },
         Ray { tmin: 2.0, tmax: 1.0, ..good },
         Ray { tmin: f32::NAN, ..good },
+        // Would hit at t = 3, but an interval from below 0 is not taken.
+        Ray { tmin: -1.0, ..good },
     ] {
         assert!(accel.intersect(&shapes, &bad).is_none(), "{bad:?}");
         assert!(!accel.occluded(&shapes, &bad), "{bad:?}");
