@@ -43,7 +43,7 @@ fn bvh(c: &mut Criterion) {
         group.throughput(Throughput::Elements(rays.len() as u64));
         for (label, backend) in &backends {
             // Testing every primitive of a large mesh says nothing: small scenes only.
-            let primitives = render::exhaustive::ExhaustiveAccel::build(&scene.shapes).primitives();
+            let (_, primitives) = render::exhaustive::counts(&scene.shapes);
             if *backend == Backend::Exhaustive && primitives > 2 * render::exhaustive::SMALL_SCENE {
                 continue;
             }

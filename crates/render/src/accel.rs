@@ -3,7 +3,7 @@
 //! ([`crate::exhaustive`]), chosen by `--accel` (auto by default).
 
 use crate::embree::EmbreeAccel;
-use crate::exhaustive::{ExhaustiveAccel, SMALL_SCENE, SMALL_SCENE_TRIANGLES};
+use crate::exhaustive::{small, ExhaustiveAccel};
 use crate::geometry::{Accel, Intersector, PreliminaryHit, Ray, Shape};
 
 /// Which ray-query backend scenes are built with ([`build_intersector`]).
@@ -121,7 +121,7 @@ impl Intersector for SceneAccel {
 }
 
 /// The ray queries over `shapes` by `backend`. With [`Backend::Auto`]: a test of every
-/// primitive for scenes of at most [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`]
+/// primitive for scenes of at most [`crate::exhaustive::SMALL_SCENE_TRIANGLES`] triangles and [`crate::exhaustive::SMALL_SCENE`]
 /// primitives (faster there than either hierarchy, in renders), else Embree where its library loads (the faster
 /// hierarchy on every scene measured: triangles alone, spheres alone, both), else the built-in
 /// BVH (also when Embree fails, with a warning on stderr); an error when [`Backend::Embree`] is
@@ -143,21 +143,4 @@ pub fn build_intersector(shapes: &[Shape], backend: Backend) -> std::result::Res
         },
         Backend::Auto => Ok(SceneAccel::Bvh(Accel::build(shapes)?)),
     }
-}
-
-/// Whether `shapes` hold at most [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`]
-/// primitives in all.
-fn small(shapes: &[Shape]) -> bool {
-    let (mut triangles, mut all) = (0, 0);
-    for s in shapes {
-        let n = match &s.geometry {
-            crate::geometry::ShapeGeometry::Mesh { mesh, .. } => {
-                triangles += mesh.indices.len();
-                mesh.indices.len()
-            }
-            _ => 1,
-        };
-        all += n;
-    }
-    triangles <= SMALL_SCENE_TRIANGLES && all <= SMALL_SCENE
 }

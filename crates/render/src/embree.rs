@@ -543,7 +543,7 @@ impl EmbreeAccel {
     /// The closest hit of `ray` (on mesh shape `only` alone when given).
     #[inline]
     fn closest(&self, ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
-        if !valid(ray) {
+        if !ray.queryable() {
             return None;
         }
         let mut rh = RtcRayHit {
@@ -572,13 +572,6 @@ impl EmbreeAccel {
             bary: Vec2::new(rh.hit.u, rh.hit.v),
         })
     }
-}
-
-/// Whether Embree may be given `ray`: a finite origin and direction and a non-empty interval
-/// starting at or after 0 (its queries are undefined otherwise; such a ray hits nothing).
-#[inline]
-fn valid(ray: &Ray) -> bool {
-    ray.o.is_finite() && ray.d.is_finite() && ray.tmin >= 0.0 && ray.tmin < ray.tmax
 }
 
 #[inline]
@@ -613,7 +606,7 @@ impl Intersector for EmbreeAccel {
 
     #[inline]
     fn occluded(&self, _shapes: &[Shape], ray: &Ray) -> bool {
-        if !valid(ray) {
+        if !ray.queryable() {
             return false;
         }
         let mut r = rtc_ray(ray);

@@ -39,6 +39,22 @@ pub const SMALL_SCENE_TRIANGLES: usize = 48;
 /// [`crate::accel::Backend::Auto`] to test them all ([`SMALL_SCENE_TRIANGLES`]).
 pub const SMALL_SCENE: usize = 56;
 
+/// Triangles and primitives of every kind (triangles, spheres, disks) in `shapes`, counted
+/// without building anything.
+pub fn counts(shapes: &[Shape]) -> (usize, usize) {
+    shapes.iter().fold((0, 0), |(triangles, all), s| match &s.geometry {
+        ShapeGeometry::Mesh { mesh, .. } => (triangles + mesh.indices.len(), all + mesh.indices.len()),
+        _ => (triangles, all + 1),
+    })
+}
+
+/// Whether `shapes` are few enough for [`crate::accel::Backend::Auto`] to test them all: at most
+/// [`SMALL_SCENE_TRIANGLES`] triangles and [`SMALL_SCENE`] primitives.
+pub fn small(shapes: &[Shape]) -> bool {
+    let (triangles, all) = counts(shapes);
+    triangles <= SMALL_SCENE_TRIANGLES && all <= SMALL_SCENE
+}
+
 /// Eight triangles: a corner and the two edges from it, one array per coordinate. Lanes past the
 /// scene's last triangle have zero edges, which the test rejects (zero determinant).
 #[derive(Clone, Copy, Default)]
@@ -52,16 +68,12 @@ struct Block {
     index: [u32; LANES],
 }
 
-/// A sphere or disk: its shape index (its geometry is read from the shapes at query time).
-#[derive(Clone, Copy)]
-struct Analytic {
-    shape: u32,
-}
-
 /// Every primitive of a small scene, tested in turn ([`Intersector`]).
 pub struct ExhaustiveAccel {
     blocks: Vec<Block>,
-    analytic: Vec<Analytic>,
+    /// The spheres' and disks' shape indices (their geometry is read from the shapes at query
+    /// time).
+    analytic: Vec<u32>,
     triangles: usize,
     avx2: bool,
 }
@@ -93,9 +105,7 @@ impl ExhaustiveAccel {
                         triangles += 1;
                     }
                 }
-                ShapeGeometry::Sphere { .. } | ShapeGeometry::Disk { .. } => {
-                    analytic.push(Analytic { shape: si as u32 })
-                }
+                ShapeGeometry::Sphere { .. } | ShapeGeometry::Disk { .. } => analytic.push(si as u32),
             }
         }
         ExhaustiveAccel { blocks, analytic, triangles, avx2: avx2() }
@@ -113,23 +123,18 @@ impl ExhaustiveAccel {
         self.avx2
     }
 
-    /// Primitives held (triangles, spheres and disks).
-    pub fn primitives(&self) -> usize {
-        self.triangles + self.analytic.len()
-    }
-
     /// The closest hit, on shape `only` alone if given.
     #[inline]
     fn closest(&self, shapes: &[Shape], ray: &Ray, only: Option<u32>) -> Option<PreliminaryHit> {
         let mut best = self.closest_triangle(ray, only);
         let mut tmax = best.map_or(ray.tmax, |h| h.t);
-        for a in &self.analytic {
-            if only.is_some_and(|s| s != a.shape) {
+        for &shape in &self.analytic {
+            if only.is_some_and(|s| s != shape) {
                 continue;
             }
-            if let Some(t) = analytic_hit(shapes, a.shape, ray, tmax) {
+            if let Some(t) = analytic_hit(shapes, shape, ray, tmax) {
                 tmax = t;
-                best = Some(PreliminaryHit { t, shape: a.shape, index: 0, bary: Vec2::ZERO });
+                best = Some(PreliminaryHit { t, shape, index: 0, bary: Vec2::ZERO });
             }
         }
         best
@@ -309,17 +314,10 @@ unsafe fn any_avx2(blocks: &[Block], ray: &Ray) -> bool {
     any_in(blocks, ray)
 }
 
-/// Whether `ray` may be tested: a finite origin and direction and a non-empty interval from 0 on
-/// (as Embree requires, so the backends agree on what such a ray hits: nothing).
-#[inline]
-fn valid(ray: &Ray) -> bool {
-    ray.o.is_finite() && ray.d.is_finite() && ray.tmin >= 0.0 && ray.tmin < ray.tmax
-}
-
 impl Intersector for ExhaustiveAccel {
     #[inline]
     fn intersect(&self, shapes: &[Shape], ray: &Ray) -> Option<PreliminaryHit> {
-        if !valid(ray) {
+        if !ray.queryable() {
             return None;
         }
         self.closest(shapes, ray, None)
@@ -327,14 +325,14 @@ impl Intersector for ExhaustiveAccel {
 
     #[inline]
     fn occluded(&self, shapes: &[Shape], ray: &Ray) -> bool {
-        if !valid(ray) {
+        if !ray.queryable() {
             return false;
         }
-        self.any_triangle(ray) || self.analytic.iter().any(|a| analytic_hit(shapes, a.shape, ray, ray.tmax).is_some())
+        self.any_triangle(ray) || self.analytic.iter().any(|&a| analytic_hit(shapes, a, ray, ray.tmax).is_some())
     }
 
     fn intersect_shape(&self, shapes: &[Shape], ray: &Ray, shape: u32) -> Option<PreliminaryHit> {
-        if !valid(ray) {
+        if !ray.queryable() {
             return None;
         }
         self.closest(shapes, ray, Some(shape))

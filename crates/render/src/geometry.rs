@@ -35,6 +35,14 @@ impl Ray {
     pub fn at(&self, t: f32) -> Vec3 {
         self.o + self.d * t
     }
+
+    /// Whether a backend may be given this ray: a finite origin and direction and a non-empty
+    /// interval starting at or after 0. Embree's queries are undefined otherwise; Embree and the
+    /// exhaustive backend both answer such a ray with no hit.
+    #[inline]
+    pub fn queryable(&self) -> bool {
+        self.o.is_finite() && self.d.is_finite() && self.tmin >= 0.0 && self.tmin < self.tmax
+    }
 }
 
 /// The geometric kinds of shape.
