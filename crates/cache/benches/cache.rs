@@ -2,9 +2,11 @@
 //! `eviction/*`, `in_flight/*`) or per texel filled (`fill/*`), so criterion's `thrpt` (or
 //! `time / elements`) reads directly as the cost the report quotes.
 //!
-//! - `hit/{trilinear,anisotropic}/{coherent,random}/{micro64,micro4,micro0,nocount}`: lookups on a warm
-//!   cache (every tile resident). `coherent`: a scanline walk (neighbouring lookups share
-//!   tiles); `random`: uniform uv over 64×64 level-0 tiles (the micro-cache rarely helps).
+//! - `hit/{trilinear,anisotropic}/{coherent,random}/{micro64,micro64-f16,micro4,micro0,nocount}`:
+//!   lookups on a warm cache (every tile resident), f32 texels unless named (renders store f16).
+//!   `coherent`: a scanline walk (neighbouring lookups share tiles); `random`: uniform uv over
+//!   64×64 level-0 tiles (the micro-cache rarely helps). Each variant also through a
+//!   [`cache::Reader`] (`…-reader`), the per-thread handle renders use.
 //! - `fill/*`: lookups that each fill one new tile with a trivial fill function, per texel:
 //!   the cache's own cost of filling (requests, rounding, stores, allocation, eviction).
 //! - `tile_size/T`: a render-like trace (camera scanlines plus scattered secondary lookups) with
@@ -90,23 +92,41 @@ fn run(c: &TileCache, id: TextureId, queries: &[Query], fill: &(impl Fn(TexelReq
     queries.iter().map(|&(uv, cov, f)| c.lookup(id, uv, cov, f, fill)[0]).sum()
 }
 
+fn run_reader(
+    r: &cache::Reader,
+    id: TextureId,
+    queries: &[Query],
+    fill: &(impl Fn(TexelRequest) -> [f32; 3] + ?Sized),
+) -> f32 {
+    queries.iter().map(|&(uv, cov, f)| r.lookup(id, uv, cov, f, fill)[0]).sum()
+}
+
 fn hits(crit: &mut Criterion) {
     let mut g = crit.benchmark_group("hit");
     for (name, filter) in [("trilinear", Filter::TRILINEAR), ("anisotropic", Filter::anisotropic(8.0))] {
         for coherent in [true, false] {
             let q = hit_queries(coherent, filter);
             g.throughput(Throughput::Elements(q.len() as u64));
-            for (variant, micro_cache, count_requests) in
-                [("micro64", 64, true), ("micro4", 4, true), ("micro0", 0, true), ("nocount", 64, false)]
-            {
+            for (variant, micro_cache, count_requests, format) in [
+                ("micro64", 64, true, TexelFormat::F32),
+                ("micro64-f16", 64, true, TexelFormat::F16),
+                ("micro4", 4, true, TexelFormat::F32),
+                ("micro0", 0, true, TexelFormat::F32),
+                ("nocount", 64, false, TexelFormat::F32),
+            ] {
                 let config = CacheConfig { micro_cache, count_requests, ..CacheConfig::with_budget(1 << 30) };
-                let (c, id) = cache(config, TexelFormat::F32);
+                let (c, id) = cache(config, format);
                 run(&c, id, &q, &cheap);
                 let fills = c.stats().total().fills;
                 let pattern = if coherent { "coherent" } else { "random" };
                 g.bench_function(BenchmarkId::new(format!("{name}/{pattern}"), variant), |b| {
                     b.iter(|| black_box(run(&c, id, &q, &cheap)))
                 });
+                let reader = c.reader();
+                g.bench_function(BenchmarkId::new(format!("{name}/{pattern}"), format!("{variant}-reader")), |b| {
+                    b.iter(|| black_box(run_reader(&reader, id, &q, &cheap)))
+                });
+                drop(reader);
                 assert_eq!(c.stats().total().fills, fills, "hit benchmark missed");
             }
         }

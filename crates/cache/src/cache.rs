@@ -341,9 +341,28 @@ impl TileCache {
     where
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
+        self.lookup_in(&Shared, tex, uv, cov_uv, level, filter, fill)
+    }
+
+    /// [`TileCache::lookup_with_level`] keeping recent tiles and counts in `local`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn lookup_in<L: Local, F>(
+        &self,
+        local: &L,
+        tex: TextureId,
+        uv: Vec2,
+        cov_uv: Mat2,
+        level: f32,
+        filter: Filter,
+        fill: &F,
+    ) -> [f32; 3]
+    where
+        F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
+    {
         let t = &self.textures[tex.0 as usize];
         if self.config.count_requests {
-            t.counters.count_lookup();
+            local.count_lookup(t, tex);
         }
         let hi = filter.max_level.min(t.desc.max_level);
         let lo = filter.min_level.min(hi);
@@ -352,11 +371,11 @@ impl TileCache {
             FilterKind::Trilinear => {
                 debug_assert_eq!(level.to_bits(), level_for(cov_uv, d0).to_bits());
                 let lod = level.clamp(f32::from(lo), f32::from(hi));
-                filter::trilinear(lod, hi, |l| self.bilinear(t, tex, l, uv, fill))
+                filter::trilinear(lod, hi, |l| self.bilinear(local, t, tex, l, uv, fill))
             }
             FilterKind::Anisotropic { max_anisotropy } => {
                 filter::anisotropic(cov_uv, d0, lo, hi, max_anisotropy, &self.probes, |offset, lod| {
-                    filter::trilinear(lod, hi, |l| self.bilinear(t, tex, l, uv + offset, fill))
+                    filter::trilinear(lod, hi, |l| self.bilinear(local, t, tex, l, uv + offset, fill))
                 })
             }
         }
@@ -370,11 +389,11 @@ impl TileCache {
     {
         let t = &self.textures[tex.0 as usize];
         if self.config.count_requests {
-            t.counters.count_lookup();
+            Shared.count_lookup(t, tex);
         }
         let hi = t.desc.max_level;
         let lod = if level.is_nan() { f32::from(hi) } else { level.clamp(0.0, f32::from(hi)) };
-        filter::trilinear(lod, hi, |l| self.bilinear(t, tex, l, uv, fill))
+        filter::trilinear(lod, hi, |l| self.bilinear(&Shared, t, tex, l, uv, fill))
     }
 
     /// A snapshot of the statistics, per texture and level.
@@ -404,7 +423,7 @@ impl TileCache {
 
     /// One bilinear tap of `level` at `uv`: from a tile, or from texels evaluated directly.
     #[inline]
-    fn bilinear<F>(&self, t: &Texture, tex: TextureId, level: u8, uv: Vec2, fill: &F) -> Texel
+    fn bilinear<L: Local, F>(&self, local: &L, t: &Texture, tex: TextureId, level: u8, uv: Vec2, fill: &F) -> Texel
     where
         F: Fn(TexelRequest) -> Texel + ?Sized,
     {
@@ -415,15 +434,15 @@ impl TileCache {
         let (lx, ly) = ((i0 & mask) as usize, (j0 & mask) as usize);
         let key = Key { tex: tex.0, level, x: tx as i32, y: ty as i32 };
         if self.config.count_requests {
-            t.counters.count_request(level);
+            local.count_request(t, tex, level);
         }
-        if let Some(v) = self.micro_get(&key, |tile| tile.bilinear(lx, ly, fx, fy)) {
+        if let Some(v) = local.get(self, &key, |tile| tile.bilinear(lx, ly, fx, fy)) {
             return v;
         }
         match self.acquire(t, key, fill) {
             Some(tile) => {
                 let v = tile.bilinear(lx, ly, fx, fy);
-                self.micro_put(key, tile);
+                local.put(self, key, tile);
                 v
             }
             None => {
@@ -623,6 +642,176 @@ impl TileCache {
                 m.slots[i] = Some(MicroEntry { cache: self.id, key, tile });
             }
         });
+    }
+}
+
+/// Where a lookup finds the tiles it read recently and counts its requests.
+trait Local {
+    /// Reads tile `key` if it is held here and was not evicted.
+    fn get<R>(&self, cache: &TileCache, key: &Key, read: impl FnOnce(&Tile) -> R) -> Option<R>;
+    /// Holds `tile` for later lookups.
+    fn put(&self, cache: &TileCache, key: Key, tile: Arc<Tile>);
+    /// Counts one lookup of `tex`.
+    fn count_lookup(&self, t: &Texture, tex: TextureId);
+    /// Counts one tile request of `tex` at `level`.
+    fn count_request(&self, t: &Texture, tex: TextureId, level: u8);
+}
+
+/// The calling thread's micro-cache and the cache's striped counters: what [`TileCache`]'s own
+/// lookups use.
+struct Shared;
+
+impl Local for Shared {
+    #[inline]
+    fn get<R>(&self, cache: &TileCache, key: &Key, read: impl FnOnce(&Tile) -> R) -> Option<R> {
+        cache.micro_get(key, read)
+    }
+    #[inline]
+    fn put(&self, cache: &TileCache, key: Key, tile: Arc<Tile>) {
+        cache.micro_put(key, tile)
+    }
+    #[inline]
+    fn count_lookup(&self, t: &Texture, _: TextureId) {
+        t.counters.count_lookup();
+    }
+    #[inline]
+    fn count_request(&self, t: &Texture, _: TextureId, level: u8) {
+        t.counters.count_request(level);
+    }
+}
+
+/// Counts a [`Reader`] keeps per texture: lookups, then requests per level.
+const READER_COUNTS: usize = 2 + MAX_LEVEL as usize;
+
+/// One thread's handle for many lookups into a [`TileCache`]: the same results as the cache's
+/// own lookups, bit for bit, with the recent tiles in a table of the reader's own instead of the
+/// thread's micro-cache, and the hit-path counts kept in plain integers until the reader is
+/// dropped (or [`Reader::flush`]ed).
+///
+/// The table has [`CacheConfig::micro_cache`] slots rounded up to a power of two, indexed by a
+/// multiplicative hash of the tile's key; each holds a strong reference to its tile, as the
+/// micro-cache does (the same budget caveat applies, per live reader). A hit reads the slot,
+/// checks the tile's eviction flag and taps it: no thread-local access, no shared counter, no
+/// lock. Lookups are re-entrant (a miss's fill may look up other textures through the same
+/// reader): the table is borrowed only around reads and writes of one slot.
+pub struct Reader<'c> {
+    cache: &'c TileCache,
+    slots: RefCell<Box<[Option<(Key, Arc<Tile>)>]>>,
+    /// `64 − log2(slots)`: the hash's top bits index the table.
+    shift: u32,
+    /// Per texture [`READER_COUNTS`] counts: lookups, then requests at each level.
+    counts: Box<[std::cell::Cell<u64>]>,
+}
+
+impl TileCache {
+    /// A [`Reader`] for one thread's lookups.
+    pub fn reader(&self) -> Reader<'_> {
+        let n = self.config.micro_cache.next_power_of_two().max(2);
+        let slots = if self.config.micro_cache == 0 { 0 } else { n };
+        Reader {
+            cache: self,
+            slots: RefCell::new((0..slots).map(|_| None).collect()),
+            shift: 64 - n.trailing_zeros(),
+            counts: (0..self.textures.len() * READER_COUNTS).map(|_| std::cell::Cell::new(0)).collect(),
+        }
+    }
+}
+
+impl Reader<'_> {
+    /// [`TileCache::lookup`] through this reader.
+    pub fn lookup<F>(&self, tex: TextureId, uv: Vec2, cov_uv: Mat2, filter: Filter, fill: &F) -> [f32; 3]
+    where
+        F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
+    {
+        let level = match filter.kind {
+            FilterKind::Trilinear => level_for(cov_uv, self.cache.textures[tex.0 as usize].desc.texels_per_uv),
+            FilterKind::Anisotropic { .. } => f32::NAN,
+        };
+        self.lookup_with_level(tex, uv, cov_uv, level, filter, fill)
+    }
+
+    /// [`TileCache::lookup_with_level`] through this reader.
+    #[inline]
+    pub fn lookup_with_level<F>(
+        &self,
+        tex: TextureId,
+        uv: Vec2,
+        cov_uv: Mat2,
+        level: f32,
+        filter: Filter,
+        fill: &F,
+    ) -> [f32; 3]
+    where
+        F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
+    {
+        self.cache.lookup_in(self, tex, uv, cov_uv, level, filter, fill)
+    }
+
+    /// Adds the counts kept so far to the cache's statistics.
+    pub fn flush(&self) {
+        for (t, counts) in self.cache.textures.iter().zip(self.counts.chunks_exact(READER_COUNTS)) {
+            for (slot, c) in counts.iter().enumerate() {
+                t.counters.add_counted(slot, c.replace(0));
+            }
+        }
+    }
+
+    #[inline]
+    fn slot(&self, key: &Key) -> usize {
+        let h = u64::from(key.x as u32).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ u64::from(key.y as u32).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+            ^ (u64::from(key.tex) << 8 | u64::from(key.level)).wrapping_mul(0x1656_67B1_9E37_79F9);
+        (h >> self.shift) as usize
+    }
+
+    #[inline]
+    fn bump(&self, tex: TextureId, slot: usize) {
+        let c = &self.counts[tex.0 as usize * READER_COUNTS + slot];
+        c.set(c.get() + 1);
+    }
+}
+
+impl Local for Reader<'_> {
+    #[inline]
+    fn get<R>(&self, _: &TileCache, key: &Key, read: impl FnOnce(&Tile) -> R) -> Option<R> {
+        let mut slots = self.slots.try_borrow_mut().ok()?;
+        if slots.is_empty() {
+            return None;
+        }
+        let i = self.slot(key);
+        let (k, tile) = slots[i].as_ref()?;
+        if k != key {
+            return None;
+        }
+        if tile.evicted.load(Relaxed) {
+            slots[i] = None; // let its bytes go back to the budget
+            return None;
+        }
+        tile.touch();
+        Some(read(tile))
+    }
+    #[inline]
+    fn put(&self, _: &TileCache, key: Key, tile: Arc<Tile>) {
+        if let Ok(mut slots) = self.slots.try_borrow_mut() {
+            if !slots.is_empty() {
+                let i = self.slot(&key);
+                slots[i] = Some((key, tile));
+            }
+        }
+    }
+    #[inline]
+    fn count_lookup(&self, _: &Texture, tex: TextureId) {
+        self.bump(tex, 0);
+    }
+    #[inline]
+    fn count_request(&self, _: &Texture, tex: TextureId, level: u8) {
+        self.bump(tex, 1 + usize::from(level));
+    }
+}
+
+impl Drop for Reader<'_> {
+    fn drop(&mut self) {
+        self.flush();
     }
 }
 
@@ -902,5 +1091,108 @@ mod tests {
         let l0 = c.stats().textures[0].levels[0];
         assert_eq!((l0.fills, l0.refills, l0.direct), (2, 1, 0));
         assert_eq!(c.resident_bytes(), c.tile_bytes(id));
+    }
+
+    /// A [`Reader`] answers every lookup with the cache's own bits (tiles resident or not, both
+    /// filters, re-entrant fills through the same reader), and once dropped its counts equal the
+    /// cache's own counting of the same lookups (fills too where the budget holds every tile;
+    /// under a tight one, which tiles stay pinned depends on the handle).
+    #[test]
+    fn reader_matches_the_cache_bit_for_bit_and_counts_alike() {
+        let inner_desc = desc(1, TexelFormat::F16);
+        for (budget_tiles, micro) in [(4096, 64), (4096, 0), (3, 4), (4096, 1)] {
+            let d = desc(3, TexelFormat::F16);
+            let one = tile::tile_bytes(&d, T);
+            let config = CacheConfig {
+                tile_size: T,
+                budget_bytes: budget_tiles * one,
+                micro_cache: micro,
+                ..CacheConfig::default()
+            };
+            let make = || {
+                let mut c = TileCache::new(config).unwrap();
+                let outer = c.add_texture(d).unwrap();
+                let inner = c.add_texture(inner_desc).unwrap();
+                (c, outer, inner)
+            };
+            let (a, a_out, a_in) = make();
+            let (b, b_out, b_in) = make();
+            let inner_fill = |r: TexelRequest| [(5.0 * r.uv.x).sin() + r.uv.y, 0.0, 0.0];
+            let mut s = 0x9E37_79B9_u64;
+            let mut rnd = || {
+                s ^= s << 13;
+                s ^= s >> 7;
+                s ^= s << 17;
+                (s >> 40) as f32 / (1u64 << 24) as f32
+            };
+            let reader = b.reader();
+            // The outer texture's fill looks the inner one up (a cached node upstream of another).
+            let fill_a = |r: TexelRequest| {
+                let v = a.lookup(a_in, r.uv, r.covariance(), Filter::TRILINEAR, &inner_fill)[0];
+                [v, r.uv.x * v, f32::from(r.level)]
+            };
+            let fill_b = |r: TexelRequest| {
+                let v = reader.lookup(b_in, r.uv, r.covariance(), Filter::TRILINEAR, &inner_fill)[0];
+                [v, r.uv.x * v, f32::from(r.level)]
+            };
+            for k in 0..3000 {
+                let uv = Vec2::new(rnd() * 4.0 - 2.0, rnd() * 4.0 - 2.0);
+                let sx = 10f32.powf(rnd() * 3.0 - 3.5);
+                let cov = Mat2::from_cols(Vec2::new(sx * sx, 0.0), Vec2::new(0.0, sx * sx * rnd()));
+                let f = if k % 3 == 0 { Filter::anisotropic(8.0) } else { Filter::TRILINEAR };
+                let x = a.lookup(a_out, uv, cov, f, &fill_a);
+                let y = reader.lookup(b_out, uv, cov, f, &fill_b);
+                assert_eq!(x.map(f32::to_bits), y.map(f32::to_bits), "budget {budget_tiles} micro {micro} uv {uv}");
+            }
+            drop(reader);
+            let (sa, sb) = (a.stats(), b.stats());
+            // Under the tight budget the inner texture is looked up once per texel evaluated, and
+            // which outer tiles stay pinned (hence which texels are evaluated) depends on the handle.
+            let compared = if budget_tiles > 3 { 2 } else { 1 };
+            for (ta, tb) in sa.textures.iter().zip(&sb.textures).take(compared) {
+                assert_eq!(ta.lookups, tb.lookups, "budget {budget_tiles} micro {micro}");
+                for (la, lb) in ta.levels.iter().zip(&tb.levels) {
+                    assert_eq!(la.requests, lb.requests, "budget {budget_tiles} micro {micro}");
+                    if budget_tiles > 3 {
+                        assert_eq!(la.fills, lb.fills, "budget {budget_tiles} micro {micro}");
+                    }
+                }
+            }
+            assert_eq!(sb.textures[0].lookups, 3000);
+            assert!(sb.total().requests > 6000);
+        }
+    }
+
+    /// A reader's slots spread a render's working set like keys thrown at random (see
+    /// `micro_slots_spread_tiles`), and a reader lets go of a tile evicted under it.
+    #[test]
+    fn reader_slots_spread_and_release_evicted_tiles() {
+        let (c, id) = cache(1, 256);
+        let r = c.reader();
+        let mut used = std::collections::HashSet::new();
+        let mut keys = 0;
+        for tex in 0..3u32 {
+            for (level, side) in [(8u8, 8i32), (9, 4), (10, 2)] {
+                for x in 0..side {
+                    for y in 0..side {
+                        used.insert(r.slot(&Key { tex, level, x, y }));
+                        keys += 1;
+                    }
+                }
+            }
+        }
+        let expected = 256.0 * (1.0 - (-(keys as f64) / 256.0).exp());
+        assert!(used.len() as f64 > 0.85 * expected, "{} slots for {keys} keys", used.len());
+        assert!(used.iter().all(|&i| i < 256));
+        let fill = |_: TexelRequest| [1.0; 3];
+        let one = Filter::TRILINEAR.levels(0, 0);
+        r.lookup(id, Vec2::new(0.1, 0.1), Mat2::ZERO, one, &fill);
+        assert!(c.evict_one());
+        assert_eq!(c.resident_bytes(), c.tile_bytes(id)); // still held by the reader
+        r.lookup(id, Vec2::new(0.1, 0.1), Mat2::ZERO, one, &fill); // sees it evicted, refills
+        assert_eq!(c.resident_bytes(), c.tile_bytes(id));
+        drop(r);
+        let l0 = c.stats().textures[0].levels[0];
+        assert_eq!((l0.requests, l0.fills, l0.refills), (2, 2, 1));
     }
 }

@@ -39,7 +39,9 @@
 //!   needs directly instead of caching them.
 //! - **Single flight.** Concurrent misses on one tile fill it once; see [`InFlight`].
 //! - **Hot path.** A hit allocates nothing and takes no lock when the tile is in the calling
-//!   thread's micro-cache ([`CacheConfig::micro_cache`]); otherwise one shard read lock.
+//!   thread's micro-cache ([`CacheConfig::micro_cache`]); otherwise one shard read lock. A
+//!   [`Reader`] (one per thread, as a renderer holds) keeps its recent tiles in a table of its own
+//!   and its counts in plain integers: its hits touch no thread-local and no shared counter.
 
 #![deny(missing_docs)]
 
@@ -51,7 +53,7 @@ mod tile;
 
 use glam::{Mat2, Vec2};
 
-pub use cache::{tile_bytes_for, trilinear_taps, TileCache, TileRef, TrilinearTaps};
+pub use cache::{tile_bytes_for, trilinear_taps, Reader, TileCache, TileRef, TrilinearTaps};
 pub use lod::{level_for, LOD_MAX, LOD_MIN};
 pub use stats::{CacheStats, LevelStats, TextureStats};
 

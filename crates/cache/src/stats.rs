@@ -272,6 +272,15 @@ impl TextureCounters {
         self.hot_add(1 + usize::from(level));
     }
 
+    /// Adds counts kept elsewhere (a [`crate::Reader`]'s): `n` of hit-path slot `slot` (0:
+    /// lookups, `1 + ℓ`: requests at level ℓ).
+    pub fn add_counted(&self, slot: usize, n: u64) {
+        if n > 0 {
+            let line = &self.hot[stripe() * self.lines_per_stripe + slot / 8];
+            line.0[slot % 8].fetch_add(n, Relaxed);
+        }
+    }
+
     pub fn snapshot(&self, id: TextureId, tile_bytes: usize) -> TextureStats {
         let levels = self
             .levels

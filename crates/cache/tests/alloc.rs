@@ -1,4 +1,5 @@
-//! A hit allocates nothing: a counting global allocator watches lookups on resident tiles.
+//! A hit allocates nothing: a counting global allocator watches lookups on resident tiles, the
+//! cache's own and a reader's.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
@@ -49,11 +50,13 @@ fn hits_allocate_nothing() {
                 })
                 .collect();
             let filters = [Filter::TRILINEAR, Filter::anisotropic(8.0), Filter::TRILINEAR.levels(2, 3)];
+            let reader = c.reader();
             let run = || {
                 let mut acc = 0.0;
                 for &(uv, cov) in &points {
                     for f in filters {
                         acc += c.lookup(id, uv, cov, f, &fill)[0];
+                        acc += reader.lookup(id, uv, cov, f, &fill)[1];
                     }
                 }
                 acc

@@ -562,12 +562,19 @@ pub struct CacheAccess<'a> {
     /// [`CacheAccess::merge_fill_stats_into`]: merging them per fill cost more than a cheap
     /// texel's evaluation.
     pool: RefCell<Vec<Vec<EvalScratch>>>,
+    /// This thread's handle on the tile cache (its recent tiles and counts).
+    reader: cache::Reader<'a>,
 }
 
 impl<'a> CacheAccess<'a> {
     /// Access for one thread.
     pub fn new(cache: &'a NodeCache, graphs: &'a [SceneGraph]) -> Self {
-        CacheAccess { cache, graphs, pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()) }
+        CacheAccess {
+            cache,
+            graphs,
+            pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()),
+            reader: cache.cache.reader(),
+        }
     }
 
     /// The override for graph `graph`.
@@ -657,11 +664,11 @@ impl NodeOverride for GraphOverride<'_, '_> {
             [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
         };
         let v = match level {
-            Some(level) => nc.cache.lookup_with_level(tex, fp.uv, fp.cov, level, nc.filter, &fill),
-            None => nc.cache.lookup(tex, fp.uv, fp.cov, nc.filter, &fill),
+            Some(level) => self.access.reader.lookup_with_level(tex, fp.uv, fp.cov, level, nc.filter, &fill),
+            None => self.access.reader.lookup(tex, fp.uv, fp.cov, nc.filter, &fill),
         };
         let ty = self.access.graphs[self.graph as usize].graph().node_type(node);
-        let mut out = Filtered::constant(graph::Value::splat(ty, 0.0));
+        let mut out = Filtered::zero(ty);
         for (k, m) in out.ch.iter_mut().enumerate().take(3) {
             *m = Moments::constant(v[k]);
         }
