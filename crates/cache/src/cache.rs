@@ -680,6 +680,9 @@ impl Local for Shared {
     }
 }
 
+/// A [`Reader`]'s slot: a tile and its key.
+type ReaderSlot = Option<(Key, Arc<Tile>)>;
+
 /// Counts a [`Reader`] keeps per texture: lookups, then requests per level.
 const READER_COUNTS: usize = 2 + MAX_LEVEL as usize;
 
@@ -696,7 +699,7 @@ const READER_COUNTS: usize = 2 + MAX_LEVEL as usize;
 /// reader): the table is borrowed only around reads and writes of one slot.
 pub struct Reader<'c> {
     cache: &'c TileCache,
-    slots: RefCell<Box<[Option<(Key, Arc<Tile>)>]>>,
+    slots: RefCell<Box<[ReaderSlot]>>,
     /// `64 − log2(slots)`: the hash's top bits index the table.
     shift: u32,
     /// Per texture [`READER_COUNTS`] counts: lookups, then requests at each level.
