@@ -303,6 +303,15 @@ impl TileCache {
         self.textures[tex.0 as usize].tile_bytes
     }
 
+    /// Whether the tile whose own texels (not its border) include texel `texel` of `tex` at
+    /// `level` is resident now (filled and not evicted). A hint: another thread may fill or evict
+    /// it right after.
+    pub fn is_resident(&self, tex: TextureId, level: u8, texel: [i64; 2]) -> bool {
+        let (x, y) = tap_tile(texel[0], texel[1], self.config.tile_size);
+        let key = Key { tex: tex.0, level, x: x as i32, y: y as i32 };
+        matches!(read(self.shard(&key)).get(&key), Some(Slot::Ready(_)))
+    }
+
     /// Tiles in the cache now (not counting fills in progress or evicted tiles still read).
     pub fn resident_tiles(&self) -> usize {
         lock(&self.clock).ring.len()

@@ -254,6 +254,9 @@ pub struct TexelRequest {
     pub uv: Vec2,
     /// The texel's size in uv units, `1/d_ℓ`.
     pub texel_size: f32,
+    /// Whether the texel is filled as part of a whole tile (`false`: evaluated alone, for a
+    /// lookup that the budget could not give a tile). Its value must not depend on this.
+    pub in_tile: bool,
 }
 
 impl TexelRequest {

@@ -165,7 +165,7 @@ impl Tile {
         let (texture, level) = (TextureId(key.tex), key.level);
         let raw = |x: usize, y: usize| {
             let texel = [i0 + x as i64, j0 + y as i64];
-            fill(TexelRequest { texture, level, texel, uv: Vec2::new(us[x], vs[y]), texel_size })
+            fill(TexelRequest { texture, level, texel, uv: Vec2::new(us[x], vs[y]), texel_size, in_tile: true })
         };
         match &mut tile.texels {
             Texels::F32(v) => fill_rows(v, side, ch, raw),
@@ -370,6 +370,7 @@ pub(crate) fn request(tex: TextureId, level: u8, ij: [i64; 2], density: f64) -> 
         texel: ij,
         uv: Vec2::new(texel_coord(ij[0], density), texel_coord(ij[1], density)),
         texel_size: (1.0 / density) as f32,
+        in_tile: false,
     }
 }
 

@@ -92,6 +92,8 @@ pub struct EvalScratch {
     latest_nonfinite: Option<NonFinite>,
     /// Input slots of the node being evaluated ([`nodes::MAX_INPUTS`] of them).
     ins: Vec<Filtered>,
+    /// The nodes a several-node direct evaluation needs ([`Graph::eval_nodes_direct`]).
+    union: Vec<NodeId>,
 }
 
 /// Where a graph evaluation first produced a value that is not finite: the node whose inputs were
@@ -310,6 +312,7 @@ impl EvalScratch {
             instrumented: true,
             latest_nonfinite: None,
             ins: vec![Filtered::zero(ValueType::Float); nodes::MAX_INPUTS],
+            union: Vec::new(),
         }
     }
 
@@ -454,7 +457,7 @@ impl Graph {
                 scratch.needed[node.0 as usize] = true;
             }
         }
-        self.run(&order.nodes, None, fp, scratch, ov);
+        self.run(&order.nodes, &[], fp, scratch, ov);
         for (slot, o) in out.iter_mut().zip(&order.outputs) {
             let ctx_point = is_point(fp);
             *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
@@ -482,7 +485,7 @@ impl Graph {
                 scratch.needed[n.0 as usize] = false;
             }
             scratch.needed[node.0 as usize] = true;
-            self.run(upstream, None, fp, scratch, ov);
+            self.run(upstream, &[], fp, scratch, ov);
         }
         let mut v = self.resolve(&o.source, fp, is_point(fp), scratch);
         v.ty = o.ty;
@@ -503,16 +506,62 @@ impl Graph {
             scratch.needed[n.0 as usize] = false;
         }
         scratch.needed[node.0 as usize] = true;
-        self.run(upstream, Some(node), fp, scratch, ov);
+        self.run(upstream, &[node], fp, scratch, ov);
         scratch.values[node.0 as usize]
     }
 
+    /// [`Self::eval_node_direct`] for several nodes in one pass over the union of what they need
+    /// (none of them replaced by `ov`), writing their values to `out` in order. Each value is the
+    /// one [`Self::eval_node_direct`] gives for its node alone, bit for bit, as long as no node of
+    /// `nodes` is upstream of another (that one would be evaluated here instead of asked of
+    /// `ov`): a node's value depends on its inputs' values only. (At a point footprint where a
+    /// node that reads gradients is among those needed, the nodes are evaluated one by one.)
+    /// Tile fills of nodes that the same requests read compute their shared upstream once this
+    /// way.
+    pub fn eval_nodes_direct(
+        &self,
+        nodes: &[NodeId],
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+        out: &mut [Filtered],
+    ) {
+        let mut union = std::mem::take(&mut scratch.union);
+        union.clear();
+        for &n in nodes {
+            union.extend_from_slice(self.upstream(n));
+        }
+        // Ascending ids are a topological order.
+        union.sort_unstable();
+        union.dedup();
+        // At a point, a node that reads its inputs' gradients makes the whole pass keep them
+        // (see `run`): the others' gradients would then depend on what else was evaluated.
+        if is_point(fp) && union.iter().any(|id| self.nodes[id.0 as usize].reads_gradients) {
+            scratch.union = union;
+            for (o, &n) in out.iter_mut().zip(nodes) {
+                *o = self.eval_node_direct(n, fp, scratch, ov);
+            }
+            return;
+        }
+        for &n in &union {
+            scratch.needed[n.0 as usize] = false;
+        }
+        for &n in nodes {
+            scratch.needed[n.0 as usize] = true;
+        }
+        self.run(&union, nodes, fp, scratch, ov);
+        for (o, n) in out.iter_mut().zip(nodes) {
+            *o = scratch.values[n.0 as usize];
+        }
+        scratch.union = union;
+    }
+
     /// Evaluates what `nodes` (in topological order, each upstream of what was asked for) the
-    /// request needs, asking `ov` first for every node but `direct`.
+    /// request needs, asking `ov` first for every node but those of `direct`.
     fn run(
         &self,
         nodes: &[NodeId],
-        direct: Option<NodeId>,
+        direct: &[NodeId],
         fp: &Footprint,
         scratch: &mut EvalScratch,
         ov: &dyn NodeOverride,
@@ -527,7 +576,7 @@ impl Graph {
                 if !scratch.needed[i] {
                     continue;
                 }
-                if direct != Some(id) {
+                if !direct.contains(&id) {
                     if let Some(v) = ov.lookup(id, fp) {
                         scratch.values[i] = v;
                         scratch.stats.lookups[i] += 1;

@@ -18,6 +18,12 @@
 //!   texels fall in the neighbours), so its tile set is the consumer's dilated by one tile.
 //!   Cached nodes are processed from the outputs upstream, so every consumer's tiles are known
 //!   before its inputs'.
+//! - **Co-filling.** Cached nodes that a stream looks up together (on its frontier: reached
+//!   from its outputs through uncached nodes) and of which none feeds another are filled
+//!   together, as the renderer does: the fill of the one looked up first (the highest id)
+//!   evaluates, at its texels of level ℓ, every such sibling whose finest cached level is at
+//!   most ℓ, walking their inputs once. A sibling's own fills then evaluate it at its tiles
+//!   (or the co-filling node's, if more) and request its inputs only for the tiles beyond.
 //! - **Time.** Thread-seconds are the profile's per-sample time outside textures, plus each
 //!   evaluation at the node's measured cost for its level, plus lookups and filled texels at the
 //!   machine's measured costs; wall time divides by the threads.
@@ -165,6 +171,8 @@ pub struct Model<'p> {
     cost: Vec<Vec<Vec<f64>>>,
     base_thread_s: f64,
     memo: RefCell<HashMap<Vec<Component>, f64>>,
+    /// Per graph, per node: the nodes upstream of it (itself included).
+    upstream: Vec<Vec<Vec<bool>>>,
 }
 
 /// Bin of a level: `level + 1` (bin 0: finer than level 0).
@@ -250,7 +258,25 @@ impl<'p> Model<'p> {
             (r.wall_s * f64::from(r.threads) - r.texture_thread_s - r.tap_thread_s).max(0.0)
         };
         let base_thread_s = outside / r.samples as f64 * target.samples as f64;
-        Ok(Model { profile, target, bins, streams, cost, base_thread_s, memo: RefCell::new(HashMap::new()) })
+        let upstream = profile
+            .graphs
+            .iter()
+            .map(|g| {
+                (0..g.nodes.len())
+                    .map(|n| {
+                        let mut seen = vec![false; g.nodes.len()];
+                        let mut stack = vec![n as u32];
+                        while let Some(u) = stack.pop() {
+                            if !std::mem::replace(&mut seen[u as usize], true) {
+                                stack.extend(g.nodes[u as usize].inputs.iter().copied());
+                            }
+                        }
+                        seen
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(Model { profile, target, bins, streams, cost, base_thread_s, memo: RefCell::new(HashMap::new()), upstream })
     }
 
     /// The profile.
@@ -290,6 +316,41 @@ impl<'p> Model<'p> {
         }
     }
 
+    /// Per graph, per cached node: the cached nodes its tile fills compute too, as the renderer
+    /// co-fills them: those some stream looks up together with it (both on the stream's
+    /// frontier, reached from its outputs through uncached nodes) that neither feed it nor read
+    /// it.
+    fn siblings(&self, plan: &PlanSpec) -> Vec<Vec<Vec<u32>>> {
+        let graphs = &self.profile.graphs;
+        let mut sib: Vec<Vec<Vec<u32>>> = graphs.iter().map(|g| vec![Vec::new(); g.nodes.len()]).collect();
+        for s in &self.streams {
+            let (g, nodes) = (s.graph, &graphs[s.graph].nodes);
+            let mut seen = vec![false; nodes.len()];
+            let mut frontier = Vec::new();
+            let mut stack = s.outputs.clone();
+            while let Some(n) = stack.pop() {
+                if std::mem::replace(&mut seen[n as usize], true) {
+                    continue;
+                }
+                if plan.cached[g][n as usize].is_some() {
+                    frontier.push(n);
+                } else {
+                    stack.extend(nodes[n as usize].inputs.iter().copied());
+                }
+            }
+            let up = &self.upstream[g];
+            for &a in &frontier {
+                for &b in &frontier {
+                    let related = up[a as usize][b as usize] || up[b as usize][a as usize];
+                    if !related && !sib[g][a as usize].contains(&b) {
+                        sib[g][a as usize].push(b);
+                    }
+                }
+            }
+        }
+        sib
+    }
+
     /// Predicts the final render's cost under `plan`.
     pub fn predict(&self, plan: &PlanSpec) -> Prediction {
         let p = self.profile;
@@ -325,6 +386,10 @@ impl<'p> Model<'p> {
         let mut nodes: Vec<Vec<NodePrediction>> =
             p.graphs.iter().map(|g| vec![NodePrediction::default(); g.nodes.len()]).collect();
         let texels_per_tile = geo.texels_per_tile();
+        let siblings = self.siblings(plan);
+        // Tiles of a node at a level that a sibling's fills computed with theirs (co-filled).
+        let mut covered: HashMap<(usize, u32, u8), f64> = HashMap::new();
+        let mut roots = Vec::new();
         for (g, graph) in p.graphs.iter().enumerate() {
             for n in (0..graph.nodes.len()).rev() {
                 if plan.cached[g][n].is_none() {
@@ -333,13 +398,36 @@ impl<'p> Model<'p> {
                 let set = std::mem::take(&mut sets[g][n]);
                 for (&level, comps) in &set {
                     let tiles = self.count(level, comps);
-                    let texels = tiles * texels_per_tile;
                     nodes[g][n].tiles += tiles;
                     nodes[g][n].bytes += tiles * geo.tile_bytes(graph.nodes[n].channels);
                     let b = bin(i32::from(level));
-                    evals[g][n][b] += texels;
-                    let inputs = &graph.nodes[n].inputs;
-                    self.walk(g, inputs, b, plan, &mut seen, |u, served| {
+                    // The node is evaluated at its own tiles' texels, or at the tiles of the
+                    // sibling whose fills computed it, whichever are more; its inputs are
+                    // requested by its own fills only beyond what a sibling's computed.
+                    let done = covered.get(&(g, n as u32, level)).copied().unwrap_or(0.0);
+                    evals[g][n][b] += tiles.max(done) * texels_per_tile;
+                    let texels = (tiles - done).max(0.0) * texels_per_tile;
+                    roots.clear();
+                    roots.extend_from_slice(&graph.nodes[n].inputs);
+                    if done == 0.0 {
+                        // Fills of this node, looked up first (highest id), compute the siblings
+                        // read at this level (finest cached level at most this one) with it: one
+                        // walk over all their inputs.
+                        for &s in &siblings[g][n] {
+                            let key = (g, s, level);
+                            if (s as usize) < n
+                                && plan.cached[g][s as usize].is_some_and(|m| m <= level)
+                                && !covered.contains_key(&key)
+                            {
+                                covered.insert(key, tiles);
+                                roots.extend_from_slice(&graph.nodes[s as usize].inputs);
+                            }
+                        }
+                    }
+                    if texels == 0.0 {
+                        continue;
+                    }
+                    self.walk(g, &roots, b, plan, &mut seen, |u, served| {
                         requests[g][u as usize][b] += texels;
                         if served {
                             lookups[g][u as usize] += texels;

@@ -218,6 +218,65 @@ pub struct NodeCache {
     uncached: Vec<bool>,
     /// A hash of everything that decides the cached values ([`NodeCache::identity`]).
     identity: String,
+    /// Per graph, per cached node: the other cached nodes whose tiles its fills compute too
+    /// ([`co_filled`]).
+    siblings: Vec<Vec<Vec<(NodeId, TextureId)>>>,
+}
+
+/// For each cached node, the cached nodes of the same graph that some material's request looks
+/// up together with it (both on the request's frontier: reached from its outputs through
+/// uncached nodes only) and that neither feed it nor read it. A request that looks one up at a
+/// footprint looks the others up at the same footprint, so their tiles at a level are wanted
+/// together, and one evaluation of their shared upstream fills both
+/// ([`Graph::eval_nodes_direct`] gives each exactly its own value). A node that feeds another is
+/// left out: the other reads it through the cache, not evaluated. Cached nodes inside the
+/// frontier are read only by their consumers' fills, at their consumers' tiles, and get none.
+fn co_filled(
+    graphs: &[SceneGraph],
+    materials: &[crate::material::Material],
+    textures: &[Vec<Option<TextureId>>],
+) -> Vec<Vec<Vec<(NodeId, TextureId)>>> {
+    let mut siblings: Vec<Vec<Vec<(NodeId, TextureId)>>> = textures.iter().map(|t| vec![Vec::new(); t.len()]).collect();
+    for m in materials {
+        for mg in &m.graphs {
+            let gi = mg.graph as usize;
+            let g = graphs[gi].graph();
+            // The request's frontier: cached nodes reached from its outputs through uncached ones.
+            let mut frontier: Vec<(NodeId, TextureId)> = Vec::new();
+            let mut seen = vec![false; g.node_count()];
+            let mut stack: Vec<NodeId> = mg
+                .order
+                .outputs()
+                .iter()
+                .filter_map(|&o| match g.output(o).source {
+                    Source::Node { node, .. } => Some(node),
+                    _ => None,
+                })
+                .collect();
+            while let Some(n) = stack.pop() {
+                if std::mem::replace(&mut seen[n.0 as usize], true) {
+                    continue;
+                }
+                match textures[gi][n.0 as usize] {
+                    Some(t) => frontier.push((n, t)),
+                    None => stack.extend(g.node_inputs(n).iter().filter_map(|(_, s)| match s {
+                        Source::Node { node, .. } => Some(*node),
+                        _ => None,
+                    })),
+                }
+            }
+            for &(a, _) in &frontier {
+                for &(b, tb) in &frontier {
+                    let related = a == b || g.upstream(a).contains(&b) || g.upstream(b).contains(&a);
+                    let list = &mut siblings[gi][a.0 as usize];
+                    if !related && !list.iter().any(|&(n, _)| n == b) {
+                        list.push((b, tb));
+                    }
+                }
+            }
+        }
+    }
+    siblings
 }
 
 /// A uv rectangle `(min, max)`.
@@ -405,13 +464,14 @@ impl NodeCache {
             Strategy::Bake(res) => Some(*res),
             _ => None,
         };
-        NodeCache::build(graphs, bake, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, &scene.materials, bake, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
     }
 
     /// The cache for the chosen nodes; with `bake` (texels across each uv rectangle), the baked
     /// textures, filled before this returns.
     fn build(
         graphs: &[SceneGraph],
+        materials: &[crate::material::Material],
         bake: Option<u32>,
         chosen: Vec<Vec<bool>>,
         min_level: Vec<Vec<u8>>,
@@ -457,7 +517,8 @@ impl NodeCache {
         let filter = Filter::TRILINEAR;
         identity.push_str(&format!("baked={baked};filter={filter:?}"));
         let identity = plan::text_hash(&[identity.as_bytes()]);
-        let nc = NodeCache { cache, textures, filter, baked, min_level, uncached, identity };
+        let siblings = co_filled(graphs, materials, &textures);
+        let nc = NodeCache { cache, textures, filter, baked, min_level, uncached, identity, siblings };
         if baked {
             nc.bake(graphs, &rects)?;
         }
@@ -473,7 +534,7 @@ impl NodeCache {
         if sel.chosen.iter().flatten().all(|c| !c) {
             return Ok(None);
         }
-        NodeCache::build(graphs, None, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, &scene.materials, None, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
     }
 
     /// Fills every tile of every level of the baked textures over their uv rectangles.
@@ -528,6 +589,21 @@ impl NodeCache {
         &self.identity
     }
 
+    /// This cache with co-filling off: each node's tile fills evaluate that node alone, as before
+    /// co-filling existed. The images are the same either way (tests compare them); this is for
+    /// measuring what co-filling saves.
+    pub fn without_co_filling(mut self) -> NodeCache {
+        for per_node in &mut self.siblings {
+            per_node.iter_mut().for_each(Vec::clear);
+        }
+        self
+    }
+
+    /// The cached nodes whose tiles the fills of `node` (of scene graph `graph`) compute too.
+    pub fn co_filled_with(&self, graph: u32, node: NodeId) -> Vec<NodeId> {
+        self.siblings[graph as usize][node.0 as usize].iter().map(|&(n, _)| n).collect()
+    }
+
     /// Number of cached nodes.
     pub fn cached_nodes(&self) -> usize {
         self.textures.iter().flatten().filter(|t| t.is_some()).count()
@@ -564,6 +640,63 @@ pub struct CacheAccess<'a> {
     pool: RefCell<Vec<Vec<EvalScratch>>>,
     /// This thread's handle on the tile cache (its recent tiles and counts).
     reader: cache::Reader<'a>,
+    /// Texels of sibling nodes computed by a co-filling evaluation and not yet read by their
+    /// own tile's fill ([`CacheAccess::fill_texel`]), by (graph, node, level, texel).
+    co_filled: RefCell<std::collections::HashMap<TexelKey, [f32; 3], BuildTexelHasher>>,
+    /// The values a co-filling evaluation writes (one per node it evaluates).
+    co_values: RefCell<Vec<Filtered>>,
+    /// The nodes a co-filling evaluation evaluates: the filled one first.
+    co_nodes: RefCell<Vec<NodeId>>,
+}
+
+/// A texel of a node's texture: graph, node, level, texel indices.
+type TexelKey = (u32, u32, u8, [i64; 2]);
+
+/// Most co-filled texels a thread keeps waiting for their tiles' fills: a request looks its
+/// cached nodes up one after the other at one footprint, so a sibling's tiles are filled right
+/// after the tiles that computed them; what is left over (a sibling tile filled meanwhile by
+/// another thread, or already resident) is dropped at this size.
+const CO_FILLED_MAX: usize = 1 << 14;
+
+/// Hasher for [`TexelKey`]s (multiply-rotate over the fields; the keys are small integers).
+#[derive(Default)]
+struct TexelHasher(u64);
+
+impl std::hash::Hasher for TexelHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u8(&mut self, v: u8) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_i64(&mut self, v: i64) {
+        self.write_u64(v as u64);
+    }
+    fn write_usize(&mut self, v: usize) {
+        self.write_u64(v as u64);
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0 ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(26);
+    }
+}
+
+/// [`std::hash::BuildHasher`] of [`TexelHasher`].
+#[derive(Clone, Copy, Default)]
+struct BuildTexelHasher;
+
+impl std::hash::BuildHasher for BuildTexelHasher {
+    type Hasher = TexelHasher;
+    fn build_hasher(&self) -> TexelHasher {
+        TexelHasher(0)
+    }
 }
 
 impl<'a> CacheAccess<'a> {
@@ -574,6 +707,9 @@ impl<'a> CacheAccess<'a> {
             graphs,
             pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()),
             reader: cache.cache.reader(),
+            co_filled: RefCell::default(),
+            co_values: RefCell::default(),
+            co_nodes: RefCell::default(),
         }
     }
 
@@ -588,6 +724,57 @@ impl<'a> CacheAccess<'a> {
         let f = g.eval_node_direct(node, fp, &mut scratch, &self.for_graph(graph));
         self.pool.borrow_mut()[graph as usize].push(scratch);
         f
+    }
+
+    /// The value of texel `req` of `node`'s texture (its channels' means): kept from an earlier
+    /// co-filling evaluation if there is one, otherwise evaluated together with those of the
+    /// node's siblings ([`co_filled`]) that lookups read at this level (their finest cached
+    /// level is at most this one) and whose tile here is not resident, keeping theirs for their
+    /// own tiles' fills. Each texel's value is the node's own evaluation, bit for bit, whichever
+    /// way it was computed.
+    fn fill_texel(&self, graph: u32, node: NodeId, req: &cache::TexelRequest) -> [f32; 3] {
+        let mean = |f: &Filtered| [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean];
+        let key = (graph, node.0, req.level, req.texel);
+        if let Some(v) = self.co_filled.borrow_mut().remove(&key) {
+            return v;
+        }
+        let fp = Footprint::new(req.uv, req.covariance());
+        let nc = self.cache;
+        let (gi, min_level) = (graph as usize, &nc.min_level[graph as usize]);
+        let mut nodes = std::mem::take(&mut *self.co_nodes.borrow_mut());
+        nodes.clear();
+        nodes.push(node);
+        // A texel evaluated alone (the budget gave its lookup no tile) keeps no siblings: their
+        // lookups would rarely ask for the same few texels.
+        let siblings = if req.in_tile { &nc.siblings[gi][node.0 as usize][..] } else { &[] };
+        for &(s, tex) in siblings {
+            if min_level[s.0 as usize] <= req.level && !nc.cache.is_resident(tex, req.level, req.texel) {
+                nodes.push(s);
+            }
+        }
+        if nodes.len() == 1 {
+            *self.co_nodes.borrow_mut() = nodes;
+            return mean(&self.fill(graph, node, &fp));
+        }
+        let g = self.graphs[gi].graph();
+        let mut scratch = self.pool.borrow_mut()[gi].pop().unwrap_or_else(|| EvalScratch::new(g));
+        let mut values = std::mem::take(&mut *self.co_values.borrow_mut());
+        values.resize(nodes.len(), Filtered::zero(graph::ValueType::Float));
+        g.eval_nodes_direct(&nodes, &fp, &mut scratch, &self.for_graph(graph), &mut values);
+        self.pool.borrow_mut()[gi].push(scratch);
+        {
+            let mut kept = self.co_filled.borrow_mut();
+            if kept.len() + nodes.len() > CO_FILLED_MAX {
+                kept.clear();
+            }
+            for (s, v) in nodes.iter().zip(&values).skip(1) {
+                kept.insert((graph, s.0, req.level, req.texel), mean(v));
+            }
+        }
+        let v = mean(&values[0]);
+        *self.co_values.borrow_mut() = values;
+        *self.co_nodes.borrow_mut() = nodes;
+        v
     }
 }
 
@@ -659,10 +846,7 @@ impl NodeOverride for GraphOverride<'_, '_> {
             }
             Some(level)
         };
-        let fill = |req: cache::TexelRequest| {
-            let f = self.access.fill(self.graph, node, &Footprint::new(req.uv, req.covariance()));
-            [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
-        };
+        let fill = |req: cache::TexelRequest| self.access.fill_texel(self.graph, node, &req);
         let v = match level {
             Some(level) => self.access.reader.lookup_with_level(tex, fp.uv, fp.cov, level, nc.filter, &fill),
             None => self.access.reader.lookup(tex, fp.uv, fp.cov, nc.filter, &fill),

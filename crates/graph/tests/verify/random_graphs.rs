@@ -655,3 +655,78 @@ fn file_and_multi_output_nodes_are_drawn() {
         assert!(listings.contains(&format!(" = {cat}<")), "`{cat}` is never built");
     }
 }
+
+/// Answers one node with a fixed value (as a cache lookup would), whenever asked.
+struct Answers(graph::NodeId, Filtered);
+
+impl graph::NodeOverride for Answers {
+    fn lookup(&self, node: graph::NodeId, _: &Footprint) -> Option<Filtered> {
+        (node == self.0).then_some(self.1)
+    }
+}
+
+/// Several mutually independent nodes evaluated in one pass (as tile fills of nodes read
+/// together compute them) give each node's value alone, bit for bit: on random graphs, random
+/// sets of two to four nodes none of which feeds another, at random footprints, with another
+/// node answered by an override (a cached input) and without.
+#[test]
+fn nodes_evaluated_together_equal_each_alone() {
+    let mut rng = Rng(0x5EED_C0F1);
+    let (mut sets, mut compared) = (0, 0);
+    for index in 0..400 {
+        let size = 4 + (rng.next_u64() % 30) as usize;
+        let rg = fuzz::random_graph(&mut rng, size, index % 2 == 0);
+        let g = &rg.graph;
+        let ids: Vec<graph::NodeId> = g.node_ids().collect();
+        let independent =
+            |a: graph::NodeId, b: graph::NodeId| !g.upstream(a).contains(&b) && !g.upstream(b).contains(&a);
+        let mut set: Vec<graph::NodeId> = Vec::new();
+        for _ in 0..8 {
+            let n = ids[(rng.next_u64() % ids.len() as u64) as usize];
+            if set.len() < 4 && set.iter().all(|&m| independent(m, n)) {
+                set.push(n);
+            }
+        }
+        if set.len() < 2 {
+            continue;
+        }
+        sets += 1;
+        // A node outside the set, upstream of some of it, answered by the override.
+        let others: Vec<graph::NodeId> = ids
+            .iter()
+            .copied()
+            .filter(|n| !set.contains(n) && set.iter().any(|&m| g.upstream(m).contains(n)))
+            .collect();
+        let mut scratch = EvalScratch::new(g);
+        for k in 0..6 {
+            let uv = fuzz::random_centre(&mut rng);
+            let (l, _) = fuzz::random_footprint(&mut rng);
+            let fp = if k == 0 { Footprint::point(uv) } else { Footprint::new(uv, l * l.transpose()) };
+            let mut fixed = Filtered::zero(graph::ValueType::Float);
+            fixed.ch[0].mean = 0.25;
+            let answered = others.first().map(|&o| Answers(o, fixed));
+            let ov: &dyn graph::NodeOverride = match &answered {
+                Some(a) if k % 2 == 1 => a,
+                _ => &NoOverride,
+            };
+            let mut together = vec![Filtered::zero(graph::ValueType::Float); set.len()];
+            g.eval_nodes_direct(&set, &fp, &mut scratch, ov, &mut together);
+            for (&n, t) in set.iter().zip(&together) {
+                let alone = g.eval_node_direct(n, &fp, &mut scratch, ov);
+                let same = alone.ty == t.ty
+                    && alone.ch.iter().zip(&t.ch).all(|(a, b)| {
+                        let (a, b) = ([a.mean, a.grad.x, a.grad.y, a.var], [b.mean, b.grad.x, b.grad.y, b.var]);
+                        a.iter().zip(&b).all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
+                    });
+                assert!(
+                    same,
+                    "graph {index}, node {}: together {t:?}, alone {alone:?}\n{}",
+                    g.node_name(n),
+                    rg.listing
+                );
+                compared += 1;
+            }
+        }
+    }
+    assert!(sets > 100 && compared > 1000, "{sets} sets, {compared} comparisons");
+}

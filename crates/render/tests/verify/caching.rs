@@ -199,3 +199,54 @@ fn geometry_dependent_nodes_are_evaluated_directly() {
     assert!(NodeCache::new(&scene, &"nodes:checks".parse().unwrap(), 1 << 26).is_ok());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Tile fills of nodes that one request looks up together compute them in one pass
+/// (co-filling): the images are identical with it and without it, at any budget (a tight one
+/// evicts, so siblings' tiles are filled in every order), while the graphs evaluate fewer
+/// nodes. Siblings are the nodes a request looks up, never one that feeds another.
+#[test]
+fn co_filling_keeps_images_and_saves_evaluations() {
+    let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    let defines = [("res".to_string(), "40".to_string())];
+    let scene = render::loader::load_file(&scenes.join("rusted_metal.xml"), &defines).unwrap_or_else(|e| panic!("{e}"));
+    let evals = |out: &render::integrator::RenderOutput| -> u64 {
+        out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum()
+    };
+    for budget in [1usize << 29, 96 << 10] {
+        let render = |nc: &NodeCache| render_cached(&scene, RenderSettings::new(2, 9), Some(nc), &|_| {});
+        let on = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap();
+        let off = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap().without_co_filling();
+        let (a, b) = (render(&on), render(&off));
+        assert!(a.image == b.image, "budget {budget}: co-filling changed the image");
+        let (ea, eb) = (evals(&a), evals(&b));
+        eprintln!(
+            "budget {budget}: {ea} evaluations co-filling, {eb} without; evictions {}",
+            on.stats().total().evictions
+        );
+        assert!(ea < eb, "budget {budget}: co-filling should evaluate less ({ea} against {eb})");
+        if budget < 1 << 20 {
+            assert!(on.stats().total().evictions > 0, "the tight budget should evict");
+        }
+    }
+    // The rust graph's four outputs are read together and none feeds another: each is co-filled
+    // with the other three. Caching every node adds inner nodes, which no request looks up.
+    let nc = NodeCache::new(&scene, &Strategy::Outputs, 1 << 29).unwrap().unwrap();
+    let g = scene
+        .graphs
+        .iter()
+        .position(|g| g.graph().node_ids().any(|n| g.graph().node_name(n) == "NG_rust/base_color"))
+        .unwrap();
+    let graph = scene.graphs[g].graph();
+    let id = |name: &str| graph.node_ids().find(|&n| graph.node_name(n) == name).unwrap();
+    let mut sib: Vec<&str> =
+        nc.co_filled_with(g as u32, id("NG_rust/base_color")).iter().map(|&n| graph.node_name(n)).collect();
+    sib.sort_unstable();
+    assert_eq!(sib, ["NG_rust/metalness", "NG_rust/roughness", "NG_rust/specular"]);
+    let all = NodeCache::new(&scene, &Strategy::All, 1 << 29).unwrap().unwrap();
+    for n in graph.node_ids() {
+        for s in all.co_filled_with(g as u32, n) {
+            assert!(!graph.upstream(n).contains(&s) && !graph.upstream(s).contains(&n));
+        }
+    }
+    assert!(all.co_filled_with(g as u32, id("NG_rust/rust_noise")).is_empty(), "an inner node has no siblings");
+}
