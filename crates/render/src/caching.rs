@@ -537,14 +537,19 @@ impl NodeCache {
         NodeCache::build(graphs, &scene.materials, None, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
     }
 
-    /// Fills every tile of every level of the baked textures over their uv rectangles.
+    /// Fills every tile of every level of the baked textures over their uv rectangles. The
+    /// tiles at one place and level of the nodes one graph co-fills ([`co_filled`]) are filled
+    /// by one job, the first's fill computing the others' texels with its own.
     fn bake(&self, graphs: &[SceneGraph], rects: &[Vec<Option<UvRect>>]) -> Result<()> {
         use rayon::prelude::*;
+        use std::collections::BTreeMap;
         let t = self.cache.config().tile_size as f32;
-        let mut jobs = Vec::new();
+        // (graph, level, tile y, tile x) → the baked nodes with a tile there, highest id first
+        // (the order in which a request looks them up, which co-filling assumes).
+        let mut jobs: BTreeMap<(u32, u8, i64, i64), Vec<(NodeId, TextureId, glam::Vec2)>> = BTreeMap::new();
         let mut bytes = 0usize;
         for (gi, per_node) in self.textures.iter().enumerate() {
-            for (n, tex) in per_node.iter().enumerate() {
+            for (n, tex) in per_node.iter().enumerate().rev() {
                 let (Some(tex), Some((lo, hi))) = (tex, rects[gi][n]) else { continue };
                 let desc = self.cache.texture(*tex);
                 for level in 0..=desc.max_level {
@@ -554,7 +559,7 @@ impl NodeCache {
                     for ty in y0..=y1 {
                         for tx in x0..=x1 {
                             let centre = glam::Vec2::new((tx as f32 + 0.5) * t / d, (ty as f32 + 0.5) * t / d);
-                            jobs.push((gi as u32, NodeId(n as u32), *tex, level, centre));
+                            jobs.entry((gi as u32, level, ty, tx)).or_default().push((NodeId(n as u32), *tex, centre));
                             bytes += self.cache.tile_bytes(*tex);
                         }
                     }
@@ -568,14 +573,14 @@ impl NodeCache {
                 self.cache.config().budget_bytes as f64 / 1048576.0
             )));
         }
+        let jobs: Vec<_> = jobs.into_iter().collect();
         jobs.par_iter().for_each_init(
             || CacheAccess::new(self, graphs),
-            |access, &(g, node, tex, level, centre)| {
-                let fill = |req: cache::TexelRequest| {
-                    let f = access.fill(g, node, &Footprint::new(req.uv, req.covariance()));
-                    [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean]
-                };
-                self.cache.lookup_level(tex, centre, level as f32, &fill);
+            |access, ((g, level, _, _), tiles)| {
+                for &(node, tex, centre) in tiles {
+                    let fill = |req: cache::TexelRequest| access.fill_texel(*g, node, &req);
+                    self.cache.lookup_level(tex, centre, f32::from(*level), &fill);
+                }
             },
         );
         Ok(())
