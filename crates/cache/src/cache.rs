@@ -326,12 +326,7 @@ impl TileCache {
     where
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
-        // Anisotropic lookups choose their probes' level themselves.
-        let level = match filter.kind {
-            FilterKind::Trilinear => level_for(cov_uv, self.textures[tex.0 as usize].desc.texels_per_uv),
-            FilterKind::Anisotropic { .. } => f32::NAN,
-        };
-        self.lookup_with_level(tex, uv, cov_uv, level, filter, fill)
+        self.lookup_with_level(tex, uv, cov_uv, self.filter_level(tex, cov_uv, filter), filter, fill)
     }
 
     /// [`TileCache::lookup`] whose caller already computed `level`, which must be
@@ -351,6 +346,15 @@ impl TileCache {
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
         self.lookup_in(&Shared, tex, uv, cov_uv, level, filter, fill)
+    }
+
+    /// The level [`TileCache::lookup_with_level`] wants for `filter`: [`level_for`] of the
+    /// footprint for trilinear lookups (anisotropic ones choose their probes' level themselves).
+    fn filter_level(&self, tex: TextureId, cov_uv: Mat2, filter: Filter) -> f32 {
+        match filter.kind {
+            FilterKind::Trilinear => level_for(cov_uv, self.textures[tex.0 as usize].desc.texels_per_uv),
+            FilterKind::Anisotropic { .. } => f32::NAN,
+        }
     }
 
     /// [`TileCache::lookup_with_level`] keeping recent tiles and counts in `local`.
@@ -735,11 +739,7 @@ impl Reader<'_> {
     where
         F: Fn(TexelRequest) -> [f32; 3] + ?Sized,
     {
-        let level = match filter.kind {
-            FilterKind::Trilinear => level_for(cov_uv, self.cache.textures[tex.0 as usize].desc.texels_per_uv),
-            FilterKind::Anisotropic { .. } => f32::NAN,
-        };
-        self.lookup_with_level(tex, uv, cov_uv, level, filter, fill)
+        self.lookup_with_level(tex, uv, cov_uv, self.cache.filter_level(tex, cov_uv, filter), filter, fill)
     }
 
     /// [`TileCache::lookup_with_level`] through this reader.
