@@ -47,6 +47,8 @@ pub struct TileCache {
     clock: Mutex<Clock>,
     budget: Arc<Budget>,
     probes: ProbeTables,
+    /// Set at the first eviction: the budget does not hold the working set.
+    evicting: std::sync::atomic::AtomicBool,
 }
 
 type TileMap = HashMap<Key, Slot, BuildKeyHasher>;
@@ -254,6 +256,7 @@ impl TileCache {
             clock: Mutex::new(Clock { ring: VecDeque::new(), evicted: HashSet::default() }),
             budget: Arc::new(Budget::new(config.budget_bytes)),
             probes: ProbeTables::new(),
+            evicting: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -310,6 +313,12 @@ impl TileCache {
         let (x, y) = tap_tile(texel[0], texel[1], self.config.tile_size);
         let key = Key { tex: tex.0, level, x: x as i32, y: y as i32 };
         matches!(read(self.shard(&key)).get(&key), Some(Slot::Ready(_)))
+    }
+
+    /// Whether the cache has evicted a tile since it was made: its budget does not hold the
+    /// working set of the lookups so far.
+    pub fn has_evicted(&self) -> bool {
+        self.evicting.load(Relaxed)
     }
 
     /// Tiles in the cache now (not counting fills in progress or evicted tiles still read).
@@ -604,6 +613,9 @@ impl TileCache {
             }
         };
         victim.evicted.store(true, Relaxed);
+        if !self.evicting.load(Relaxed) {
+            self.evicting.store(true, Relaxed);
+        }
         let key = victim.key;
         {
             let mut map = write(self.shard(&key));

@@ -750,8 +750,11 @@ impl<'a> CacheAccess<'a> {
         nodes.clear();
         nodes.push(node);
         // A texel evaluated alone (the budget gave its lookup no tile) keeps no siblings: their
-        // lookups would rarely ask for the same few texels.
-        let siblings = if req.in_tile { &nc.siblings[gi][node.0 as usize][..] } else { &[] };
+        // lookups would rarely ask for the same few texels. Nor does any once the cache evicts:
+        // siblings' tiles then come and go between the fill that computed them and their own
+        // (measured: more evaluations than without co-filling, at two threads).
+        let co = req.in_tile && !nc.cache.has_evicted();
+        let siblings = if co { &nc.siblings[gi][node.0 as usize][..] } else { &[] };
         for &(s, tex) in siblings {
             if min_level[s.0 as usize] <= req.level && !nc.cache.is_resident(tex, req.level, req.texel) {
                 nodes.push(s);

