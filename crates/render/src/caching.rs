@@ -229,12 +229,15 @@ pub struct NodeCache {
 /// footprint looks the others up at the same footprint, so their tiles at a level are wanted
 /// together, and one evaluation of their shared upstream fills both
 /// ([`Graph::eval_nodes_direct`] gives each exactly its own value). A node that feeds another is
-/// left out: the other reads it through the cache, not evaluated. Cached nodes inside the
-/// frontier are read only by their consumers' fills, at their consumers' tiles, and get none.
+/// left out: the other reads it through the cache, not evaluated; so is one whose texture has
+/// another texel density (a bake's), whose texel of the same index lies elsewhere. Cached nodes
+/// inside the frontier are read only by their consumers' fills, at their consumers' tiles, and
+/// get none.
 fn co_filled(
     graphs: &[SceneGraph],
     materials: &[crate::material::Material],
     textures: &[Vec<Option<TextureId>>],
+    cache: &TileCache,
 ) -> Vec<Vec<Vec<(NodeId, TextureId)>>> {
     let mut siblings: Vec<Vec<Vec<(NodeId, TextureId)>>> = textures.iter().map(|t| vec![Vec::new(); t.len()]).collect();
     for m in materials {
@@ -265,9 +268,12 @@ fn co_filled(
                     })),
                 }
             }
-            for &(a, _) in &frontier {
+            for &(a, ta) in &frontier {
                 for &(b, tb) in &frontier {
-                    let related = a == b || g.upstream(a).contains(&b) || g.upstream(b).contains(&a);
+                    // Texels are shared by index: both textures must lay them out alike (bakes
+                    // size each node's texture to its own uv rectangle).
+                    let alike = cache.texture(ta).texels_per_uv == cache.texture(tb).texels_per_uv;
+                    let related = a == b || !alike || g.upstream(a).contains(&b) || g.upstream(b).contains(&a);
                     let list = &mut siblings[gi][a.0 as usize];
                     if !related && !list.iter().any(|&(n, _)| n == b) {
                         list.push((b, tb));
@@ -438,6 +444,17 @@ impl NodeCache {
     /// Builds the cache for `strategy` within `budget_bytes`; `None` for [`Strategy::None`].
     /// For [`Strategy::Bake`] the textures are filled before this returns.
     pub fn new(scene: &Scene, strategy: &Strategy, budget_bytes: usize) -> Result<Option<NodeCache>> {
+        NodeCache::with_co_filling(scene, strategy, budget_bytes, true)
+    }
+
+    /// [`NodeCache::new`], with co-filling ([`co_filled`]) on or off. The images are the same
+    /// either way (tests compare them); off is for measuring what co-filling saves.
+    pub fn with_co_filling(
+        scene: &Scene,
+        strategy: &Strategy,
+        budget_bytes: usize,
+        co_fill: bool,
+    ) -> Result<Option<NodeCache>> {
         let graphs = &scene.graphs[..];
         let mut sel = Selection::empty(graphs);
         match strategy {
@@ -464,7 +481,8 @@ impl NodeCache {
             Strategy::Bake(res) => Some(*res),
             _ => None,
         };
-        NodeCache::build(graphs, &scene.materials, bake, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, &scene.materials, bake, sel.chosen, sel.min_level, sel.rects, budget_bytes, co_fill)
+            .map(Some)
     }
 
     /// The cache for the chosen nodes; with `bake` (texels across each uv rectangle), the baked
@@ -477,6 +495,7 @@ impl NodeCache {
         min_level: Vec<Vec<u8>>,
         rects: Vec<Vec<Option<UvRect>>>,
         budget_bytes: usize,
+        co_fill: bool,
     ) -> Result<NodeCache> {
         // Threads wait for a tile another thread is filling: the direct-evaluation alternative
         // was measured to change images between thread counts, and images must not.
@@ -517,7 +536,11 @@ impl NodeCache {
         let filter = Filter::TRILINEAR;
         identity.push_str(&format!("baked={baked};filter={filter:?}"));
         let identity = plan::text_hash(&[identity.as_bytes()]);
-        let siblings = co_filled(graphs, materials, &textures);
+        let siblings = if co_fill {
+            co_filled(graphs, materials, &textures, &cache)
+        } else {
+            textures.iter().map(|t| vec![Vec::new(); t.len()]).collect()
+        };
         let nc = NodeCache { cache, textures, filter, baked, min_level, uncached, identity, siblings };
         if baked {
             nc.bake(graphs, &rects)?;
@@ -534,7 +557,8 @@ impl NodeCache {
         if sel.chosen.iter().flatten().all(|c| !c) {
             return Ok(None);
         }
-        NodeCache::build(graphs, &scene.materials, None, sel.chosen, sel.min_level, sel.rects, budget_bytes).map(Some)
+        NodeCache::build(graphs, &scene.materials, None, sel.chosen, sel.min_level, sel.rects, budget_bytes, true)
+            .map(Some)
     }
 
     /// Fills every tile of every level of the baked textures over their uv rectangles. The
@@ -592,16 +616,6 @@ impl NodeCache {
     /// caches have the same identity (and that agree otherwise) make the same image.
     pub fn identity(&self) -> &str {
         &self.identity
-    }
-
-    /// This cache with co-filling off: each node's tile fills evaluate that node alone, as before
-    /// co-filling existed. The images are the same either way (tests compare them); this is for
-    /// measuring what co-filling saves.
-    pub fn without_co_filling(mut self) -> NodeCache {
-        for per_node in &mut self.siblings {
-            per_node.iter_mut().for_each(Vec::clear);
-        }
-        self
     }
 
     /// The cached nodes whose tiles the fills of `node` (of scene graph `graph`) compute too.

@@ -219,7 +219,7 @@ fn co_filling_keeps_images_and_saves_evaluations() {
         let render =
             |nc: &NodeCache| pool.install(|| render_cached(&scene, RenderSettings::new(2, 9), Some(nc), &|_| {}));
         let on = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap();
-        let off = NodeCache::new(&scene, &Strategy::Outputs, budget).unwrap().unwrap().without_co_filling();
+        let off = NodeCache::with_co_filling(&scene, &Strategy::Outputs, budget, false).unwrap().unwrap();
         let (a, b) = (render(&on), render(&off));
         assert!(a.image == b.image, "budget {budget}: co-filling changed the image");
         let (ea, eb) = (evals(&a), evals(&b));
@@ -261,4 +261,52 @@ fn co_filling_keeps_images_and_saves_evaluations() {
         }
     }
     assert!(all.co_filled_with(g as u32, id("NG_rust/rust_noise")).is_empty(), "an inner node has no siblings");
+}
+
+/// A bake sizes each output's texture to the uv rectangle of the shapes that read it, so two
+/// outputs of one material can lay their texels out differently; co-filling shares texels by
+/// index, and must then leave that pair alone. `rusted_metal` with its iron ball replaced by a
+/// quad whose uv run to 3 (the ball reads only the roughness): the roughness's bake covers
+/// [0, 3]², the colour's [0, 1]², and the two are not co-filled, while the colour and the
+/// metalness still are; the baked image is the one without co-filling.
+#[test]
+fn bakes_co_fill_only_textures_laid_out_alike() {
+    let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
+    let dir = std::env::temp_dir().join(format!("tessera-cofill-bake-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::copy(scenes.join("rusted_metal.mtlx"), dir.join("rusted_metal.mtlx")).unwrap();
+    std::fs::write(
+        dir.join("quad.obj"),
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nvt 0 0\nvt 3 0\nvt 3 3\nvt 0 3\nvn 0 0 1\nf 1/1/1 2/2/1 3/3/1\nf 1/1/1 3/3/1 4/4/1\n",
+    )
+    .unwrap();
+    let xml = std::fs::read_to_string(scenes.join("rusted_metal.xml")).unwrap();
+    let (a, b) = (
+        xml.find(r#"<shape type="sphere" id="iron_ball">"#).unwrap(),
+        xml.find("<bsdf type=\"roughconductor\">").unwrap(),
+    );
+    let quad = r#"<shape type="obj" id="iron_ball">
+        <string name="filename" value="quad.obj"/>
+        <transform name="to_world"><scale value="0.3"/><rotate x="1" angle="-90"/><translate x="-0.95" y="0.01" z="0.35"/></transform>
+        "#;
+    std::fs::write(dir.join("scene.xml"), format!("{}{}{}", &xml[..a], quad, &xml[b..])).unwrap();
+    let defines = [("res".to_string(), "40".to_string())];
+    let scene = render::loader::load_file(&dir.join("scene.xml"), &defines).unwrap_or_else(|e| panic!("{e}"));
+    let nc = NodeCache::new(&scene, &"bake:64".parse().unwrap(), 1 << 28).unwrap().unwrap();
+    let g = scene
+        .graphs
+        .iter()
+        .position(|g| g.graph().node_ids().any(|n| g.graph().node_name(n) == "NG_rust/base_color"))
+        .unwrap();
+    let graph = scene.graphs[g].graph();
+    let id = |name: &str| graph.node_ids().find(|&n| graph.node_name(n) == name).unwrap();
+    let sib: Vec<&str> =
+        nc.co_filled_with(g as u32, id("NG_rust/base_color")).iter().map(|&n| graph.node_name(n)).collect();
+    assert!(sib.contains(&"NG_rust/metalness"), "{sib:?}");
+    assert!(!sib.contains(&"NG_rust/roughness"), "textures of other densities co-filled: {sib:?}");
+    // The bake's image is the one without co-filling, bit for bit.
+    let off = NodeCache::with_co_filling(&scene, &"bake:64".parse().unwrap(), 1 << 28, false).unwrap().unwrap();
+    let render = |nc: &NodeCache| render_cached(&scene, RenderSettings::new(2, 9), Some(nc), &|_| {}).image;
+    assert!(render(&nc) == render(&off), "co-filling changed the baked image");
+    let _ = std::fs::remove_dir_all(&dir);
 }
