@@ -200,6 +200,21 @@ fn geometry_dependent_nodes_are_evaluated_directly() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// The scene graph holding `NG_rust`, and the names of the nodes co-filled with its base colour,
+/// sorted.
+fn rust_colour_siblings<'s>(scene: &'s Scene, nc: &NodeCache) -> (u32, Vec<&'s str>) {
+    let g = scene
+        .graphs
+        .iter()
+        .position(|g| g.graph().node_ids().any(|n| g.graph().node_name(n) == "NG_rust/base_color"))
+        .unwrap();
+    let graph = scene.graphs[g].graph();
+    let colour = graph.node_ids().find(|&n| graph.node_name(n) == "NG_rust/base_color").unwrap();
+    let mut sib: Vec<&str> = nc.co_filled_with(g as u32, colour).iter().map(|&n| graph.node_name(n)).collect();
+    sib.sort_unstable();
+    (g as u32, sib)
+}
+
 /// Tile fills of nodes that one request looks up together compute them in one pass
 /// (co-filling): the images are identical with it and without it, at any budget (a tight one
 /// evicts, so siblings' tiles are filled in every order), while the graphs evaluate fewer
@@ -243,24 +258,17 @@ fn co_filling_keeps_images_and_saves_evaluations() {
     // The rust graph's four outputs are read together and none feeds another: each is co-filled
     // with the other three. Caching every node adds inner nodes, which no request looks up.
     let nc = NodeCache::new(&scene, &Strategy::Outputs, 1 << 29).unwrap().unwrap();
-    let g = scene
-        .graphs
-        .iter()
-        .position(|g| g.graph().node_ids().any(|n| g.graph().node_name(n) == "NG_rust/base_color"))
-        .unwrap();
-    let graph = scene.graphs[g].graph();
-    let id = |name: &str| graph.node_ids().find(|&n| graph.node_name(n) == name).unwrap();
-    let mut sib: Vec<&str> =
-        nc.co_filled_with(g as u32, id("NG_rust/base_color")).iter().map(|&n| graph.node_name(n)).collect();
-    sib.sort_unstable();
+    let (g, sib) = rust_colour_siblings(&scene, &nc);
     assert_eq!(sib, ["NG_rust/metalness", "NG_rust/roughness", "NG_rust/specular"]);
+    let graph = scene.graphs[g as usize].graph();
+    let id = |name: &str| graph.node_ids().find(|&n| graph.node_name(n) == name).unwrap();
     let all = NodeCache::new(&scene, &Strategy::All, 1 << 29).unwrap().unwrap();
     for n in graph.node_ids() {
-        for s in all.co_filled_with(g as u32, n) {
+        for s in all.co_filled_with(g, n) {
             assert!(!graph.upstream(n).contains(&s) && !graph.upstream(s).contains(&n));
         }
     }
-    assert!(all.co_filled_with(g as u32, id("NG_rust/rust_noise")).is_empty(), "an inner node has no siblings");
+    assert!(all.co_filled_with(g, id("NG_rust/rust_noise")).is_empty(), "an inner node has no siblings");
 }
 
 /// A bake sizes each output's texture to the uv rectangle of the shapes that read it, so two
@@ -293,15 +301,7 @@ fn bakes_co_fill_only_textures_laid_out_alike() {
     let defines = [("res".to_string(), "40".to_string())];
     let scene = render::loader::load_file(&dir.join("scene.xml"), &defines).unwrap_or_else(|e| panic!("{e}"));
     let nc = NodeCache::new(&scene, &"bake:64".parse().unwrap(), 1 << 28).unwrap().unwrap();
-    let g = scene
-        .graphs
-        .iter()
-        .position(|g| g.graph().node_ids().any(|n| g.graph().node_name(n) == "NG_rust/base_color"))
-        .unwrap();
-    let graph = scene.graphs[g].graph();
-    let id = |name: &str| graph.node_ids().find(|&n| graph.node_name(n) == name).unwrap();
-    let sib: Vec<&str> =
-        nc.co_filled_with(g as u32, id("NG_rust/base_color")).iter().map(|&n| graph.node_name(n)).collect();
+    let (_, sib) = rust_colour_siblings(&scene, &nc);
     assert!(sib.contains(&"NG_rust/metalness"), "{sib:?}");
     assert!(!sib.contains(&"NG_rust/roughness"), "textures of other densities co-filled: {sib:?}");
     // The bake's image is the one without co-filling, bit for bit.
