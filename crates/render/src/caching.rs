@@ -486,7 +486,9 @@ impl NodeCache {
     }
 
     /// The cache for the chosen nodes; with `bake` (texels across each uv rectangle), the baked
-    /// textures, filled before this returns.
+    /// textures, filled before this returns. (The selection's three per-node tables come as
+    /// they are, each an argument.)
+    #[allow(clippy::too_many_arguments)]
     fn build(
         graphs: &[SceneGraph],
         materials: &[crate::material::Material],
