@@ -538,11 +538,8 @@ impl NodeCache {
         let filter = Filter::TRILINEAR;
         identity.push_str(&format!("baked={baked};filter={filter:?}"));
         let identity = plan::text_hash(&[identity.as_bytes()]);
-        let siblings = if co_fill {
-            co_filled(graphs, materials, &textures, &cache)
-        } else {
-            textures.iter().map(|t| vec![Vec::new(); t.len()]).collect()
-        };
+        // Without materials no request looks two nodes up together: no siblings.
+        let siblings = co_filled(graphs, if co_fill { materials } else { &[] }, &textures, &cache);
         let nc = NodeCache { cache, textures, filter, baked, min_level, uncached, identity, siblings };
         if baked {
             nc.bake(graphs, &rects)?;
@@ -663,7 +660,7 @@ pub struct CacheAccess<'a> {
     reader: cache::Reader<'a>,
     /// Texels of sibling nodes computed by a co-filling evaluation and not yet read by their
     /// own tile's fill ([`CacheAccess::fill_texel`]), by (graph, node, level, texel).
-    co_filled: RefCell<std::collections::HashMap<TexelKey, [f32; 3], BuildTexelHasher>>,
+    co_filled: RefCell<std::collections::HashMap<TexelKey, [f32; 3]>>,
     /// The values a co-filling evaluation writes (one per node it evaluates).
     co_values: RefCell<Vec<Filtered>>,
     /// The nodes a co-filling evaluation evaluates: the filled one first.
@@ -678,47 +675,6 @@ type TexelKey = (u32, u32, u8, [i64; 2]);
 /// after the tiles that computed them; what is left over (a sibling tile filled meanwhile by
 /// another thread, or already resident) is dropped at this size.
 const CO_FILLED_MAX: usize = 1 << 14;
-
-/// Hasher for [`TexelKey`]s (multiply-rotate over the fields; the keys are small integers).
-#[derive(Default)]
-struct TexelHasher(u64);
-
-impl std::hash::Hasher for TexelHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-    fn write_u8(&mut self, v: u8) {
-        self.write_u64(u64::from(v));
-    }
-    fn write_u32(&mut self, v: u32) {
-        self.write_u64(u64::from(v));
-    }
-    fn write_i64(&mut self, v: i64) {
-        self.write_u64(v as u64);
-    }
-    fn write_usize(&mut self, v: usize) {
-        self.write_u64(v as u64);
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0 ^ v).wrapping_mul(0x9E37_79B9_7F4A_7C15).rotate_left(26);
-    }
-}
-
-/// [`std::hash::BuildHasher`] of [`TexelHasher`].
-#[derive(Clone, Copy, Default)]
-struct BuildTexelHasher;
-
-impl std::hash::BuildHasher for BuildTexelHasher {
-    type Hasher = TexelHasher;
-    fn build_hasher(&self) -> TexelHasher {
-        TexelHasher(0)
-    }
-}
 
 impl<'a> CacheAccess<'a> {
     /// Access for one thread.
@@ -755,13 +711,17 @@ impl<'a> CacheAccess<'a> {
     /// way it was computed.
     fn fill_texel(&self, graph: u32, node: NodeId, req: &cache::TexelRequest) -> [f32; 3] {
         let mean = |f: &Filtered| [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean];
-        let key = (graph, node.0, req.level, req.texel);
-        if let Some(v) = self.co_filled.borrow_mut().remove(&key) {
-            return v;
-        }
         let fp = Footprint::new(req.uv, req.covariance());
         let nc = self.cache;
         let (gi, min_level) = (graph as usize, &nc.min_level[graph as usize]);
+        let all_siblings = &nc.siblings[gi][node.0 as usize];
+        if all_siblings.is_empty() {
+            // Nobody co-fills this node, and it co-fills nobody (the relation is symmetric).
+            return mean(&self.fill(graph, node, &fp));
+        }
+        if let Some(v) = self.co_filled.borrow_mut().remove(&(graph, node.0, req.level, req.texel)) {
+            return v;
+        }
         let mut nodes = std::mem::take(&mut *self.co_nodes.borrow_mut());
         nodes.clear();
         nodes.push(node);
@@ -770,7 +730,7 @@ impl<'a> CacheAccess<'a> {
         // siblings' tiles then come and go between the fill that computed them and their own
         // (measured: more evaluations than without co-filling, at two threads).
         let co = req.in_tile && !nc.cache.has_evicted();
-        let siblings = if co { &nc.siblings[gi][node.0 as usize][..] } else { &[] };
+        let siblings = if co { &all_siblings[..] } else { &[] };
         for &(s, tex) in siblings {
             if min_level[s.0 as usize] <= req.level && !nc.cache.is_resident(tex, req.level, req.texel) {
                 nodes.push(s);
