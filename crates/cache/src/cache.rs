@@ -47,8 +47,6 @@ pub struct TileCache {
     clock: Mutex<Clock>,
     budget: Arc<Budget>,
     probes: ProbeTables,
-    /// Set at the first eviction: the budget does not hold the working set.
-    evicting: std::sync::atomic::AtomicBool,
 }
 
 type TileMap = HashMap<Key, Slot, BuildKeyHasher>;
@@ -62,6 +60,12 @@ struct Texture {
 }
 
 enum Slot {
+    Ready(Arc<Tile>),
+    Filling(Arc<Flight>),
+}
+
+/// What holds a tile's key that [`TileCache::fill_absent`] found taken.
+enum Occupied {
     Ready(Arc<Tile>),
     Filling(Arc<Flight>),
 }
@@ -256,7 +260,6 @@ impl TileCache {
             clock: Mutex::new(Clock { ring: VecDeque::new(), evicted: HashSet::default() }),
             budget: Arc::new(Budget::new(config.budget_bytes)),
             probes: ProbeTables::new(),
-            evicting: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -313,12 +316,6 @@ impl TileCache {
         let (x, y) = tap_tile(texel[0], texel[1], self.config.tile_size);
         let key = Key { tex: tex.0, level, x: x as i32, y: y as i32 };
         matches!(read(self.shard(&key)).get(&key), Some(Slot::Ready(_)))
-    }
-
-    /// Whether the cache has evicted a tile since it was made: its budget does not hold the
-    /// working set of the lookups so far.
-    pub fn has_evicted(&self) -> bool {
-        self.evicting.load(Relaxed)
     }
 
     /// Tiles in the cache now (not counting fills in progress or evicted tiles still read).
@@ -520,21 +517,51 @@ impl TileCache {
     where
         F: Fn(TexelRequest) -> Texel + ?Sized,
     {
+        match self.fill_absent(t, key, fill, false) {
+            Ok(tile) => tile,
+            Err(Occupied::Ready(tile)) => {
+                tile.touch();
+                Some(tile)
+            }
+            Err(Occupied::Filling(f)) => self.join(t, &key, &f),
+        }
+    }
+
+    /// Fills tile `tile` of `tex` at `level` with `fill` and makes it resident, unless it is
+    /// resident or being filled already or the budget has no room for it; `true` if it was
+    /// filled. For a caller that computed the texture's texels alongside another texture's tile
+    /// fill (the same level, tile and texel layout: [`TexelRequest::place`] says where each
+    /// texel lies) and keeps them, so that the tile is resident for every thread from then on
+    /// instead of filled again by whichever looks it up first. `fill` is asked for the tile's
+    /// texels as a fill asks (and must give what a fill would).
+    pub fn prefill<F>(&self, tex: TextureId, level: u8, tile: [i32; 2], fill: &F) -> bool
+    where
+        F: Fn(TexelRequest) -> Texel + ?Sized,
+    {
+        let t = &self.textures[tex.0 as usize];
+        if level > t.desc.max_level {
+            return false;
+        }
+        let key = Key { tex: tex.0, level, x: tile[0], y: tile[1] };
+        matches!(self.fill_absent(t, key, fill, true), Ok(Some(_)))
+    }
+
+    /// Claims tile `key` (single flight), reserves its bytes, fills it and publishes it;
+    /// `Ok(None)` when the budget has no room (joiners then evaluate directly), `Err` with what
+    /// holds the key when it is taken. `prefill`: for [`TileCache::prefill`], not a request's
+    /// miss.
+    fn fill_absent<F>(&self, t: &Texture, key: Key, fill: &F, prefill: bool) -> Result<Option<Arc<Tile>>, Occupied>
+    where
+        F: Fn(TexelRequest) -> Texel + ?Sized,
+    {
         let shard = self.shard(&key);
         let flight =
             Arc::new(Flight { filler: std::thread::current().id(), done: Mutex::new(None), ready: Condvar::new() });
         {
             let mut map = write(shard);
             match map.get(&key) {
-                Some(Slot::Ready(tile)) => {
-                    tile.touch();
-                    return Some(tile.clone());
-                }
-                Some(Slot::Filling(f)) => {
-                    let f = f.clone();
-                    drop(map);
-                    return self.join(t, &key, &f);
-                }
+                Some(Slot::Ready(tile)) => return Err(Occupied::Ready(tile.clone())),
+                Some(Slot::Filling(f)) => return Err(Occupied::Filling(f.clone())),
                 None => {
                     map.insert(key, Slot::Filling(flight.clone()));
                 }
@@ -543,8 +570,10 @@ impl TileCache {
         let mut guard = FillGuard { cache: self, key, flight: &flight, armed: true };
         let c = t.counters.level(key.level);
         if !self.reserve(t.tile_bytes) {
-            c.direct.fetch_add(1, Relaxed);
-            return None; // the guard fails the flight: joiners evaluate directly too
+            if !prefill {
+                c.direct.fetch_add(1, Relaxed);
+            }
+            return Ok(None); // the guard fails the flight: joiners evaluate directly too
         }
         let tile = Tile::fill(
             key,
@@ -566,9 +595,12 @@ impl TileCache {
             }
         }
         c.fills.fetch_add(1, Relaxed);
+        if prefill {
+            c.prefills.fetch_add(1, Relaxed);
+        }
         c.texels_filled.fetch_add(tile.texel_count() as u64, Relaxed);
         flight.complete(Some(tile.clone()));
-        Some(tile)
+        Ok(Some(tile))
     }
 
     /// Removes `key`'s placeholder if it is still `flight`'s.
@@ -613,9 +645,6 @@ impl TileCache {
             }
         };
         victim.evicted.store(true, Relaxed);
-        if !self.evicting.load(Relaxed) {
-            self.evicting.store(true, Relaxed);
-        }
         let key = victim.key;
         {
             let mut map = write(self.shard(&key));
@@ -1043,6 +1072,58 @@ mod tests {
         }
         let l0 = fifo.stats().textures[0].levels[0];
         assert_eq!((l0.fills, l0.evictions, l0.refills, l0.hits), (5, 3, 2, 1));
+    }
+
+    /// A fill asks for its tile's texels with their places (row by row, border included), and
+    /// a tile made by `prefill` from the values a fill was given is that fill's tile: lookups
+    /// read the same bits and never call their fill. `prefill` leaves a resident tile alone and
+    /// a level the texture lacks untouched.
+    #[test]
+    fn prefill_makes_the_tile_a_fill_would() {
+        let value = |r: &TexelRequest| [r.uv.x * 3.0 - r.uv.y, (5.0 * r.uv.y).sin(), f32::from(r.level)];
+        let (a, id) = cache(64, 0);
+        let seen = std::cell::RefCell::new(Vec::new());
+        let fill = |r: TexelRequest| {
+            seen.borrow_mut().push(r);
+            value(&r)
+        };
+        let uv = Vec2::new(0.30, 0.55); // level 1: 8 texels per uv, tile (0, 0) of T = 8
+        let want = at(&a, id, uv, 1, &fill);
+        let reqs = seen.take();
+        let side = T as usize + 1;
+        assert_eq!(reqs.len(), side * side);
+        for (k, r) in reqs.iter().enumerate() {
+            let place = r.place.expect("a tile fill's texels have places");
+            assert_eq!((place.tile, place.index, place.count), ([0, 0], k as u32, (side * side) as u32));
+            assert_eq!(r.texel, [(k % side) as i64, (k / side) as i64]);
+        }
+        let (b, bid) = cache(64, 0);
+        let values: Vec<[f32; 3]> = reqs.iter().map(value).collect();
+        let from_values = |r: TexelRequest| values[r.place.unwrap().index as usize];
+        assert!(b.prefill(bid, 1, [0, 0], &from_values));
+        let never = |_: TexelRequest| -> [f32; 3] { panic!("the prefilled tile was filled again") };
+        assert_eq!(at(&b, bid, uv, 1, &never).map(f32::to_bits), want.map(f32::to_bits));
+        assert!(!b.prefill(bid, 1, [0, 0], &never), "a resident tile is made again");
+        assert!(!b.prefill(bid, 7, [0, 0], &never), "level 7 of a texture of levels 0–6");
+        let l1 = b.stats().textures[0].levels[1];
+        assert_eq!((l1.fills, l1.prefills, l1.misses, l1.hits), (1, 1, 0, 1));
+        // Texels evaluated alone (no room for a tile: one tile of budget, pinned by this
+        // thread's micro-cache) have no place; those of fills come a whole tile at a time.
+        let (tiny, tid) = cache(1, 4);
+        let (alone, placed) = (Cell::new(0u64), Cell::new(0u64));
+        let count = |r: TexelRequest| {
+            let c = if r.place.is_some() { &placed } else { &alone };
+            c.set(c.get() + 1);
+            [0.0; 3]
+        };
+        for k in 0..64 {
+            let uv = Vec2::new(k as f32 * 0.37 % 4.0, k as f32 * 0.61 % 4.0);
+            at(&tiny, tid, uv, 0, &count);
+        }
+        let t = tiny.stats().total();
+        assert!(t.direct > 0 && t.fills > 0, "{t:?}");
+        assert_eq!(placed.get(), t.fills * (side * side) as u64);
+        assert!(alone.get() > 0);
     }
 
     /// Lookups answered by direct evaluation (no room in the budget) equal those answered by

@@ -254,9 +254,25 @@ pub struct TexelRequest {
     pub uv: Vec2,
     /// The texel's size in uv units, `1/d_ℓ`.
     pub texel_size: f32,
-    /// Whether the texel is filled as part of a whole tile (`false`: evaluated alone, for a
-    /// lookup that the budget could not give a tile). Its value must not depend on this.
-    pub in_tile: bool,
+    /// Where the texel lies in the tile fill that asks for it; `None` where it is evaluated
+    /// alone, for a lookup that the budget could not give a tile (or that found its tile being
+    /// filled by another thread). Its value must not depend on this.
+    pub place: Option<TilePlace>,
+}
+
+/// A texel's place in a tile fill ([`TexelRequest::place`]): a fill asks for its tile's texels
+/// once each, row by row, border included, `index` 0 first and `count − 1` last. A caller that
+/// computes several textures laid out alike at once can keep the others' values for the fill's
+/// duration and hand them to [`TileCache::prefill`] when it ends.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TilePlace {
+    /// The tile's coordinates at its level: its own texels are `tile · T … tile · T + T − 1` per
+    /// axis (`T` the tile size), its border the next one.
+    pub tile: [i32; 2],
+    /// The texel's position in the fill.
+    pub index: u32,
+    /// Texels the fill asks for, `(T + 1)²`.
+    pub count: u32,
 }
 
 impl TexelRequest {

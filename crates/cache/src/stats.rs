@@ -17,10 +17,13 @@ pub struct LevelStats {
     pub requests: u64,
     /// Requests answered by a resident tile (`requests − misses`; zero when not counted).
     pub hits: u64,
-    /// Requests that found no resident tile: `fills + waits + direct`.
+    /// Requests that found no resident tile: `fills − prefills + waits + direct`.
     pub misses: u64,
-    /// Tiles filled.
+    /// Tiles filled (on a miss or by [`crate::TileCache::prefill`]).
     pub fills: u64,
+    /// Tiles made by [`crate::TileCache::prefill`] from texels computed alongside another
+    /// texture's fill (counted in `fills`, not a request's miss).
+    pub prefills: u64,
     /// Requests that waited for another thread's fill of the same tile ([`crate::InFlight::Wait`]).
     pub waits: u64,
     /// Requests answered by evaluating their texels directly: the tile was being filled
@@ -50,6 +53,7 @@ impl std::ops::AddAssign<&LevelStats> for LevelStats {
         self.hits += o.hits;
         self.misses += o.misses;
         self.fills += o.fills;
+        self.prefills += o.prefills;
         self.waits += o.waits;
         self.direct += o.direct;
         self.texels_filled += o.texels_filled;
@@ -176,6 +180,7 @@ impl Budget {
 #[derive(Default)]
 pub(crate) struct LevelCounters {
     pub fills: AtomicU64,
+    pub prefills: AtomicU64,
     pub waits: AtomicU64,
     pub direct: AtomicU64,
     pub texels_filled: AtomicU64,
@@ -289,12 +294,14 @@ impl TextureCounters {
             .map(|(l, c)| {
                 let requests = self.hot_sum(1 + l);
                 let (fills, waits, direct) = (c.fills.load(Relaxed), c.waits.load(Relaxed), c.direct.load(Relaxed));
-                let misses = fills + waits + direct;
+                let prefills = c.prefills.load(Relaxed);
+                let misses = fills.saturating_sub(prefills) + waits + direct;
                 LevelStats {
                     requests,
                     hits: requests.saturating_sub(misses),
                     misses,
                     fills,
+                    prefills,
                     waits,
                     direct,
                     texels_filled: c.texels_filled.load(Relaxed),

@@ -13,7 +13,7 @@ use glam::Vec2;
 use half::f16;
 
 use crate::stats::{Budget, TextureCounters};
-use crate::{TexelFormat, TexelRequest, TextureDesc, TextureId};
+use crate::{TexelFormat, TexelRequest, TextureDesc, TextureId, TilePlace};
 
 /// Channels of a texel as returned by lookups (zero beyond the texture's channels).
 pub(crate) type Texel = [f32; 3];
@@ -163,9 +163,11 @@ impl Tile {
         let vs: Vec<f32> = (0..side as i64).map(|y| texel_coord(j0 + y, density)).collect();
         let texel_size = (1.0 / density) as f32;
         let (texture, level) = (TextureId(key.tex), key.level);
+        let count = (side * side) as u32;
         let raw = |x: usize, y: usize| {
             let texel = [i0 + x as i64, j0 + y as i64];
-            fill(TexelRequest { texture, level, texel, uv: Vec2::new(us[x], vs[y]), texel_size, in_tile: true })
+            let place = Some(TilePlace { tile: [key.x, key.y], index: (y * side + x) as u32, count });
+            fill(TexelRequest { texture, level, texel, uv: Vec2::new(us[x], vs[y]), texel_size, place })
         };
         match &mut tile.texels {
             Texels::F32(v) => fill_rows(v, side, ch, raw),
@@ -370,7 +372,7 @@ pub(crate) fn request(tex: TextureId, level: u8, ij: [i64; 2], density: f64) -> 
         texel: ij,
         uv: Vec2::new(texel_coord(ij[0], density), texel_coord(ij[1], density)),
         texel_size: (1.0 / density) as f32,
-        in_tile: false,
+        place: None,
     }
 }
 

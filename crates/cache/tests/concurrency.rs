@@ -106,7 +106,7 @@ fn run(c: &TileCache, ids: [TextureId; 2], q: &Query) -> [f32; 3] {
             let uv = Vec2::new(((ij[0] as f64 + 0.5) / d) as f32, ((ij[1] as f64 + 0.5) / d) as f32);
             let v = c.lookup(ids[tex], uv, Mat2::ZERO, Filter::TRILINEAR.levels(level, level), &fill);
             let mut want = signature(
-                &TexelRequest { texture: ids[tex], level, texel: ij, uv, texel_size: 0.0, in_tile: true },
+                &TexelRequest { texture: ids[tex], level, texel: ij, uv, texel_size: 0.0, place: None },
                 i64::from(T),
             );
             if tex == 1 {
@@ -272,7 +272,7 @@ fn panicking_fill_leaves_the_cache_consistent() {
         });
         started.wait();
         let v = c.lookup(id, uv, Mat2::ZERO, point, &good); // waits on the doomed fill
-        assert_eq!(v, good(TexelRequest { texture: id, level: 0, texel: [0, 0], uv, texel_size: 0.0, in_tile: true }));
+        assert_eq!(v, good(TexelRequest { texture: id, level: 0, texel: [0, 0], uv, texel_size: 0.0, place: None }));
         assert!(bad.join().unwrap().is_err());
     });
     let l0 = c.stats().textures[0].levels[0];

@@ -66,7 +66,7 @@ fn texel_footprints_read_exactly_their_level() {
                 texel: [i, i],
                 uv: Vec2::splat(((i as f64 + 0.5) / d) as f32),
                 texel_size: (1.0 / d) as f32,
-                in_tile: true,
+                place: None,
             };
             let t = trilinear_taps(&desc, 16, req.uv, req.covariance());
             assert_eq!(t.lower.level, level, "texel of level {level} read at lod {}", t.lod);

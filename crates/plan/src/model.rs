@@ -22,8 +22,9 @@
 //!   from its outputs through uncached nodes) and of which none feeds another are filled
 //!   together, as the renderer does: the fill of the one looked up first (the highest id)
 //!   evaluates, at its texels of level ℓ, every such sibling whose finest cached level is at
-//!   most ℓ, walking their inputs once. A sibling's own fills then evaluate it at its tiles
-//!   (or the co-filling node's, if more) and request its inputs only for the tiles beyond.
+//!   most ℓ, walking their inputs once, and makes their tiles there as it ends. A sibling's
+//!   tiles are then its own or the co-filling node's, whichever are more, and its own fills
+//!   request its inputs only for the tiles beyond.
 //! - **Time.** Thread-seconds are the profile's per-sample time outside textures, plus each
 //!   evaluation at the node's measured cost for its level, plus lookups and filled texels at the
 //!   machine's measured costs; wall time divides by the threads.
@@ -398,13 +399,14 @@ impl<'p> Model<'p> {
                 let set = std::mem::take(&mut sets[g][n]);
                 for (&level, comps) in &set {
                     let tiles = self.count(level, comps);
-                    nodes[g][n].tiles += tiles;
-                    nodes[g][n].bytes += tiles * geo.tile_bytes(graph.nodes[n].channels);
-                    let b = bin(i32::from(level));
                     // The node is evaluated at its own tiles' texels, or at the tiles of the
-                    // sibling whose fills computed it, whichever are more; its inputs are
-                    // requested by its own fills only beyond what a sibling's computed.
+                    // sibling whose fills computed it (which make them its tiles), whichever are
+                    // more; its inputs are requested by its own fills only beyond what a
+                    // sibling's computed.
                     let done = covered.get(&(g, n as u32, level)).copied().unwrap_or(0.0);
+                    nodes[g][n].tiles += tiles.max(done);
+                    nodes[g][n].bytes += tiles.max(done) * geo.tile_bytes(graph.nodes[n].channels);
+                    let b = bin(i32::from(level));
                     evals[g][n][b] += tiles.max(done) * texels_per_tile;
                     let texels = (tiles - done).max(0.0) * texels_per_tile;
                     roots.clear();

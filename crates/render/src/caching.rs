@@ -658,23 +658,45 @@ pub struct CacheAccess<'a> {
     pool: RefCell<Vec<Vec<EvalScratch>>>,
     /// This thread's handle on the tile cache (its recent tiles and counts).
     reader: cache::Reader<'a>,
-    /// Texels of sibling nodes computed by a co-filling evaluation and not yet read by their
-    /// own tile's fill ([`CacheAccess::fill_texel`]), by (graph, node, level, texel).
-    co_filled: RefCell<std::collections::HashMap<TexelKey, [f32; 3]>>,
+    /// The co-filling tile fills in progress on this thread, innermost last (a fill can need
+    /// another cached node's fill): [`CacheAccess::fill_texel`].
+    co_fills: RefCell<Vec<CoFill>>,
+    /// Finished [`CoFill`]s' buffers, reused.
+    co_spare: RefCell<Vec<CoFill>>,
     /// The values a co-filling evaluation writes (one per node it evaluates).
     co_values: RefCell<Vec<Filtered>>,
-    /// The nodes a co-filling evaluation evaluates: the filled one first.
-    co_nodes: RefCell<Vec<NodeId>>,
 }
 
-/// A texel of a node's texture: graph, node, level, texel indices.
-type TexelKey = (u32, u32, u8, [i64; 2]);
+/// One tile fill that co-fills: the filled node's tile, and the siblings whose texels each of
+/// its texels' evaluations computes as well, kept until the fill ends and then made their tiles
+/// ([`TileCache::prefill`]).
+struct CoFill {
+    graph: u32,
+    /// The filled node.
+    node: NodeId,
+    level: u8,
+    tile: [i32; 2],
+    /// The evaluation's nodes: the filled one first, then its siblings.
+    nodes: Vec<NodeId>,
+    /// The siblings' textures (`nodes[1..]`'s).
+    textures: Vec<TextureId>,
+    /// The siblings' texels, sibling by sibling, each in the fill's order.
+    texels: Vec<[f32; 3]>,
+}
 
-/// Most co-filled texels a thread keeps waiting for their tiles' fills: a request looks its
-/// cached nodes up one after the other at one footprint, so a sibling's tiles are filled right
-/// after the tiles that computed them; what is left over (a sibling tile filled meanwhile by
-/// another thread, or already resident) is dropped at this size.
-const CO_FILLED_MAX: usize = 1 << 14;
+impl Default for CoFill {
+    fn default() -> Self {
+        CoFill {
+            graph: 0,
+            node: NodeId(0),
+            level: 0,
+            tile: [0; 2],
+            nodes: Vec::new(),
+            textures: Vec::new(),
+            texels: Vec::new(),
+        }
+    }
+}
 
 impl<'a> CacheAccess<'a> {
     /// Access for one thread.
@@ -684,9 +706,9 @@ impl<'a> CacheAccess<'a> {
             graphs,
             pool: RefCell::new(graphs.iter().map(|_| Vec::new()).collect()),
             reader: cache.cache.reader(),
-            co_filled: RefCell::default(),
+            co_fills: RefCell::default(),
+            co_spare: RefCell::default(),
             co_values: RefCell::default(),
-            co_nodes: RefCell::default(),
         }
     }
 
@@ -703,62 +725,105 @@ impl<'a> CacheAccess<'a> {
         f
     }
 
-    /// The value of texel `req` of `node`'s texture (its channels' means): kept from an earlier
-    /// co-filling evaluation if there is one, otherwise evaluated together with those of the
-    /// node's siblings ([`co_filled`]) that lookups read at this level (their finest cached
-    /// level is at most this one) and whose tile here is not resident, keeping theirs for their
-    /// own tiles' fills. Each texel's value is the node's own evaluation, bit for bit, whichever
-    /// way it was computed.
+    /// The value of texel `req` of `node`'s texture (its channels' means).
+    ///
+    /// A tile fill of a node with siblings ([`co_filled`]) evaluates, at each of its texels, the
+    /// siblings that lookups read at this level (their finest cached level is at most this one)
+    /// and whose tile here was not resident when the fill began, in one pass with the node; it
+    /// keeps their texels, and when its last texel is done makes them their tiles
+    /// ([`TileCache::prefill`]), resident for every thread: the lookups that follow at the same
+    /// footprint read them, under a budget that evicts too. Texels evaluated alone (the budget
+    /// gave their lookup no tile) co-fill nothing. Each texel's value is the node's own
+    /// evaluation, bit for bit, whichever way it was computed.
     fn fill_texel(&self, graph: u32, node: NodeId, req: &cache::TexelRequest) -> [f32; 3] {
         let mean = |f: &Filtered| [f.ch[0].mean, f.ch[1].mean, f.ch[2].mean];
         let fp = Footprint::new(req.uv, req.covariance());
         let nc = self.cache;
-        let (gi, min_level) = (graph as usize, &nc.min_level[graph as usize]);
-        let all_siblings = &nc.siblings[gi][node.0 as usize];
-        if all_siblings.is_empty() {
-            // Nobody co-fills this node, and it co-fills nobody (the relation is symmetric).
+        let all_siblings = &nc.siblings[graph as usize][node.0 as usize];
+        let Some(place) = req.place.filter(|_| !all_siblings.is_empty()) else {
+            // Nobody co-fills this node, and it co-fills nobody (the relation is symmetric); or
+            // the texel is evaluated alone.
             return mean(&self.fill(graph, node, &fp));
+        };
+        if place.index == 0 {
+            self.begin_co_fill(graph, node, req.level, place);
         }
-        if let Some(v) = self.co_filled.borrow_mut().remove(&(graph, node.0, req.level, req.texel)) {
-            return v;
-        }
-        let mut nodes = std::mem::take(&mut *self.co_nodes.borrow_mut());
-        nodes.clear();
-        nodes.push(node);
-        // A texel evaluated alone (the budget gave its lookup no tile) keeps no siblings: their
-        // lookups would rarely ask for the same few texels. Nor does any once the cache evicts:
-        // siblings' tiles then come and go between the fill that computed them and their own
-        // (measured: more evaluations than without co-filling, at two threads).
-        let co = req.in_tile && !nc.cache.has_evicted();
-        let siblings = if co { &all_siblings[..] } else { &[] };
-        for &(s, tex) in siblings {
-            if min_level[s.0 as usize] <= req.level && !nc.cache.is_resident(tex, req.level, req.texel) {
-                nodes.push(s);
-            }
-        }
-        if nodes.len() == 1 {
-            *self.co_nodes.borrow_mut() = nodes;
+        // This fill's entry: the innermost (fills it needs end before its next texel), if its
+        // first texel found siblings to evaluate.
+        let at = {
+            let fills = self.co_fills.borrow();
+            let i = fills.len().checked_sub(1);
+            i.filter(|&i| {
+                let f = &fills[i];
+                f.graph == graph && f.node == node && f.level == req.level && f.tile == place.tile
+            })
+        };
+        let Some(at) = at else {
             return mean(&self.fill(graph, node, &fp));
-        }
+        };
+        let gi = graph as usize;
         let g = self.graphs[gi].graph();
+        let mut nodes = std::mem::take(&mut self.co_fills.borrow_mut()[at].nodes);
+        // Nested fills (a cached node upstream) push and pop their own entries meanwhile.
         let mut scratch = self.pool.borrow_mut()[gi].pop().unwrap_or_else(|| EvalScratch::new(g));
         let mut values = std::mem::take(&mut *self.co_values.borrow_mut());
         values.resize(nodes.len(), Filtered::zero(graph::ValueType::Float));
         g.eval_nodes_direct(&nodes, &fp, &mut scratch, &self.for_graph(graph), &mut values);
         self.pool.borrow_mut()[gi].push(scratch);
-        {
-            let mut kept = self.co_filled.borrow_mut();
-            if kept.len() + nodes.len() > CO_FILLED_MAX {
-                kept.clear();
-            }
-            for (s, v) in nodes.iter().zip(&values).skip(1) {
-                kept.insert((graph, s.0, req.level, req.texel), mean(v));
+        let v = mean(&values[0]);
+        let mut fills = self.co_fills.borrow_mut();
+        let co = &mut fills[at];
+        for (k, f) in values.iter().skip(1).enumerate() {
+            co.texels[k * place.count as usize + place.index as usize] = mean(f);
+        }
+        std::mem::swap(&mut co.nodes, &mut nodes);
+        drop(fills);
+        *self.co_values.borrow_mut() = values;
+        if place.index + 1 == place.count {
+            self.end_co_fill(place);
+        }
+        v
+    }
+
+    /// At the first texel of a tile fill of `node`: the siblings it evaluates along.
+    fn begin_co_fill(&self, graph: u32, node: NodeId, level: u8, place: cache::TilePlace) {
+        let nc = self.cache;
+        let (gi, min_level) = (graph as usize, &nc.min_level[graph as usize]);
+        let mut co = self.co_spare.borrow_mut().pop().unwrap_or_default();
+        (co.graph, co.node, co.level, co.tile) = (graph, node, level, place.tile);
+        co.nodes.clear();
+        co.textures.clear();
+        co.nodes.push(node);
+        let size = i64::from(nc.cache.config().tile_size);
+        let texel = [i64::from(place.tile[0]) * size, i64::from(place.tile[1]) * size];
+        for &(s, tex) in &nc.siblings[gi][node.0 as usize] {
+            if min_level[s.0 as usize] <= level && !nc.cache.is_resident(tex, level, texel) {
+                co.nodes.push(s);
+                co.textures.push(tex);
             }
         }
-        let v = mean(&values[0]);
-        *self.co_values.borrow_mut() = values;
-        *self.co_nodes.borrow_mut() = nodes;
-        v
+        if co.textures.is_empty() {
+            self.co_spare.borrow_mut().push(co);
+            return;
+        }
+        co.texels.clear();
+        co.texels.resize(co.textures.len() * place.count as usize, [0.0; 3]);
+        self.co_fills.borrow_mut().push(co);
+    }
+
+    /// After the last texel of a co-filling tile fill: the siblings' tiles made from their
+    /// texels (those another thread has filled meanwhile are left as they are).
+    fn end_co_fill(&self, place: cache::TilePlace) {
+        let Some(co) = self.co_fills.borrow_mut().pop() else { return };
+        let n = place.count as usize;
+        for (k, &tex) in co.textures.iter().enumerate() {
+            let texels = &co.texels[k * n..(k + 1) * n];
+            self.cache.cache.prefill(tex, co.level, co.tile, &|r: cache::TexelRequest| {
+                let i = r.place.expect("a fill's texels have places").index as usize;
+                texels[i]
+            });
+        }
+        self.co_spare.borrow_mut().push(co);
     }
 }
 

@@ -359,8 +359,11 @@ pub struct CacheTotals {
     pub tile_hits: u64,
     /// Tile requests that found none.
     pub tile_misses: u64,
-    /// Tiles filled.
+    /// Tiles filled (on a miss, or with a co-filled sibling's texels).
     pub tiles_filled: u64,
+    /// Tiles made from texels computed alongside another node's fill (co-filled siblings;
+    /// counted in `tiles_filled`).
+    pub tiles_co_filled: u64,
     /// Texels filled.
     pub texels_filled: u64,
     /// Half-float channel values stored clamped to ±65504.
@@ -397,6 +400,8 @@ pub struct CacheLevelStats {
     pub misses: u64,
     /// Tiles filled.
     pub fills: u64,
+    /// Tiles made from a co-filled sibling's texels (counted in `fills`).
+    pub co_fills: u64,
     /// Texels filled.
     pub texels_filled: u64,
     /// Half-float channel values stored clamped.
@@ -422,6 +427,7 @@ impl CacheTotals {
             tile_hits: t.hits,
             tile_misses: t.misses,
             tiles_filled: t.fills,
+            tiles_co_filled: t.prefills,
             texels_filled: t.texels_filled,
             texels_saturated: t.texels_saturated,
             evictions: t.evictions,
@@ -453,6 +459,7 @@ impl CacheReport {
                         hits: l.hits,
                         misses: l.misses,
                         fills: l.fills,
+                        co_fills: l.prefills,
                         texels_filled: l.texels_filled,
                         texels_saturated: l.texels_saturated,
                         evictions: l.evictions,

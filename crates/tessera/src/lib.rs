@@ -557,12 +557,13 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
     if let Some(nc) = &r.node_cache {
         let t = CacheTotals::of(nc);
         eprintln!(
-            "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
+            "tile cache: {} nodes cached, {} lookups, {} tile hits / {} misses, {} tiles filled ({} co-filled, {} texels), {} evictions, peak {:.1} MiB of {:.1} MiB",
             nc.cached_nodes(),
             t.lookups,
             t.tile_hits,
             t.tile_misses,
             t.tiles_filled,
+            t.tiles_co_filled,
             t.texels_filled,
             t.evictions,
             t.peak_bytes as f64 / 1048576.0,

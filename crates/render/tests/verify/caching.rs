@@ -218,7 +218,8 @@ fn rust_colour_siblings<'s>(scene: &'s Scene, nc: &NodeCache) -> (u32, Vec<&'s s
 /// Tile fills of nodes that one request looks up together compute them in one pass
 /// (co-filling): the images are identical with it and without it, at any budget (a tight one
 /// evicts, so siblings' tiles are filled in every order), while the graphs evaluate fewer
-/// nodes where the budget holds the working set (and not more where it does not). Siblings are the nodes a request looks up, never one that feeds another.
+/// nodes, whether the budget holds the working set or not, and no more at two threads than at
+/// one. Siblings are the nodes a request looks up, never one that feeds another.
 #[test]
 fn co_filling_keeps_images_and_saves_evaluations() {
     let scenes = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../scenes");
@@ -243,18 +244,26 @@ fn co_filling_keeps_images_and_saves_evaluations() {
             on.stats().total().evictions
         );
         if budget < 1 << 20 {
-            // Once the cache evicts, fills stop co-filling (siblings' tiles come and go between
-            // the fill that computed them and their own); what was co-filled before must not
-            // have cost much.
             assert!(on.stats().total().evictions > 0, "the tight budget should evict");
-            assert!(ea as f64 <= 1.05 * eb as f64, "budget {budget}: {ea} evaluations co-filling, {eb} without");
-        } else {
-            assert!(
-                (ea as f64) < 0.8 * eb as f64,
-                "budget {budget}: co-filling should evaluate less ({ea} against {eb})"
-            );
         }
+        // Under eviction too: the siblings' tiles are made when the fill that computed them
+        // ends, and the lookups that follow at the same footprint read them.
+        assert!((ea as f64) < 0.8 * eb as f64, "budget {budget}: co-filling should evaluate less ({ea} against {eb})");
     }
+    // A fill publishes its siblings' tiles as soon as it ends, so another thread that looks
+    // them up finds them resident instead of filling them again (it had evaluated 4–8 % more at
+    // two threads than one, each sibling's texels kept by the thread that computed them).
+    // Threads that miss the same tile at once still evaluate its texels directly: a margin.
+    let threads = |n: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap();
+        let nc = NodeCache::new(&scene, &Strategy::Outputs, 1 << 29).unwrap().unwrap();
+        let out = pool.install(|| render_cached(&scene, RenderSettings::new(2, 9), Some(&nc), &|_| {}));
+        (evals(&out), out.image)
+    };
+    let ((e1, one), (e2, two)) = (threads(1), threads(2));
+    assert!(one == two, "the image depends on the thread count");
+    eprintln!("{e1} evaluations at one thread, {e2} at two");
+    assert!((e2 as f64) <= 1.03 * e1 as f64, "{e2} evaluations at two threads, {e1} at one");
     // The rust graph's four outputs are read together and none feeds another: each is co-filled
     // with the other three. Caching every node adds inner nodes, which no request looks up.
     let nc = NodeCache::new(&scene, &Strategy::Outputs, 1 << 29).unwrap().unwrap();
