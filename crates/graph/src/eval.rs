@@ -94,6 +94,8 @@ pub struct EvalScratch {
     ins: Vec<Filtered>,
     /// The nodes a several-node direct evaluation needs ([`Graph::eval_nodes_direct`]).
     union: Vec<NodeId>,
+    /// The nodes `union` was gathered for: a tile fill asks for the same nodes at every texel.
+    union_of: Vec<NodeId>,
 }
 
 /// Where a graph evaluation first produced a value that is not finite: the node whose inputs were
@@ -313,6 +315,7 @@ impl EvalScratch {
             latest_nonfinite: None,
             ins: vec![Filtered::zero(ValueType::Float); nodes::MAX_INPUTS],
             union: Vec::new(),
+            union_of: Vec::new(),
         }
     }
 
@@ -527,13 +530,18 @@ impl Graph {
         out: &mut [Filtered],
     ) {
         let mut union = std::mem::take(&mut scratch.union);
-        union.clear();
-        for &n in nodes {
-            union.extend_from_slice(self.upstream(n));
+        // (Empty: taken by an evaluation that panicked and never put it back.)
+        if union.is_empty() || scratch.union_of != nodes {
+            union.clear();
+            for &n in nodes {
+                union.extend_from_slice(self.upstream(n));
+            }
+            // Ascending ids are a topological order.
+            union.sort_unstable();
+            union.dedup();
+            scratch.union_of.clear();
+            scratch.union_of.extend_from_slice(nodes);
         }
-        // Ascending ids are a topological order.
-        union.sort_unstable();
-        union.dedup();
         // At a point, a node that reads its inputs' gradients makes the whole pass keep them
         // (see `run`): the others' gradients would then depend on what else was evaluated.
         if is_point(fp) && union.iter().any(|id| self.nodes[id.0 as usize].reads_gradients) {
