@@ -545,10 +545,36 @@ pub fn square_wave_derivatives(m: f64, s: f64, out: &mut [f64]) {
 /// each had cost a cosine and an exponential). Over a run of `n` terms the recurrences drift
 /// by about `n` roundings, relative to each term, far below the band's 1e-9 cut.
 fn checker_fourier(m: [f64; 2], c: [f64; 3], det: f64) -> f64 {
-    const Q: f64 = 2.0 * 20.723 / (PI * PI); // ln 1e9 = 20.723
-    let j_max = ((Q * c[2] / det).sqrt() as i64).min(4095);
     // Damping ratio's own factor per step: exp(−π²/2 · 8c₂).
     let ratio_step = exp_damping(-4.0 * PI * PI * c[2]);
+    fourier_band(c, det, |jf, sign, mut k, hi| {
+        // E[cos(π(jU ± kV))] = cos(phase) · damp.
+        let kf = k as f64;
+        let q = jf * jf * c[0] + 2.0 * sign * jf * kf * c[1] + kf * kf * c[2];
+        let mut damp = exp_damping(-0.5 * PI * PI * q);
+        // q(k + 2) − q(k) = 4(±j c₁ + c₂(k + 1)).
+        let mut ratio = exp_damping(-2.0 * PI * PI * (sign * jf * c[1] + c[2] * (kf + 1.0)));
+        let (mut sn, mut cs) = (PI * (jf * m[0] + sign * kf * m[1])).sin_cos();
+        let (dsn, dcs) = (2.0 * PI * sign * m[1]).sin_cos();
+        let mut run = 0.0;
+        while (k as f64) <= hi {
+            run += cs * damp / k as f64;
+            (sn, cs) = (sn * dcs + cs * dsn, cs * dcs - sn * dsn);
+            damp *= ratio;
+            ratio *= ratio_step;
+            k += 2;
+        }
+        run
+    })
+}
+
+/// [`checker_fourier`]'s band: for each odd `j`, the runs of odd `k ≥ 1` (one per sign of the
+/// `±` in `q`) within the quadratic's interval, `run(j, ±1, first k, last k bound)` giving a
+/// run's sum of `E[cos(π(jU ± kV))]/k`; the series is `(16/π²) Σ ∓ ½ run / j` (the sine product
+/// is `(cos(−) − cos(+))/2`).
+fn fourier_band(c: [f64; 3], det: f64, mut run: impl FnMut(f64, f64, i64, f64) -> f64) -> f64 {
+    const Q: f64 = 2.0 * 20.723 / (PI * PI); // ln 1e9 = 20.723
+    let j_max = ((Q * c[2] / det).sqrt() as i64).min(4095);
     let mut e = 0.0;
     let mut j = 1;
     while j <= j_max {
@@ -565,26 +591,9 @@ fn checker_fourier(m: [f64; 2], c: [f64; 3], det: f64) -> f64 {
                     k += 1;
                 }
                 let hi = centre + hw;
-                if (k as f64) > hi {
-                    continue;
+                if (k as f64) <= hi {
+                    e -= sign * 0.5 * run(jf, sign, k, hi) / jf;
                 }
-                // E[cos(π(jU ± kV))] = cos(phase) · damp; the sine product is (cos(−) − cos(+))/2.
-                let kf = k as f64;
-                let q = jf * jf * c[0] + 2.0 * sign * jf * kf * c[1] + kf * kf * c[2];
-                let mut damp = exp_damping(-0.5 * PI * PI * q);
-                // q(k + 2) − q(k) = 4(±j c₁ + c₂(k + 1)).
-                let mut ratio = exp_damping(-2.0 * PI * PI * (sign * jf * c[1] + c[2] * (kf + 1.0)));
-                let (mut sn, mut cs) = (PI * (jf * m[0] + sign * kf * m[1])).sin_cos();
-                let (dsn, dcs) = (2.0 * PI * sign * m[1]).sin_cos();
-                let mut run = 0.0;
-                while (k as f64) <= hi {
-                    run += cs * damp / k as f64;
-                    (sn, cs) = (sn * dcs + cs * dsn, cs * dcs - sn * dsn);
-                    damp *= ratio;
-                    ratio *= ratio_step;
-                    k += 2;
-                }
-                e -= sign * 0.5 * run / jf;
             }
         }
         j += 2;
@@ -922,35 +931,15 @@ mod tests {
     /// [`checker_fourier`] term by term, each with its own cosine and exponential (what it
     /// computed before its recurrences).
     fn checker_fourier_direct(m: [f64; 2], c: [f64; 3], det: f64) -> f64 {
-        const Q: f64 = 2.0 * 20.723 / (PI * PI); // ln 1e9 = 20.723
-        let j_max = ((Q * c[2] / det).sqrt() as i64).min(4095);
-        let mut e = 0.0;
-        let mut j = 1;
-        while j <= j_max {
-            let jf = j as f64;
-            // q(k) = c₂ (k ∓ j c₁/c₂)² + j² det/c₂ < Q.
-            let room = Q - jf * jf * det / c[2];
-            if room > 0.0 {
-                let hw = (room / c[2]).sqrt();
-                for sign in [-1.0, 1.0] {
-                    let centre = -sign * jf * c[1] / c[2];
-                    let lo = (centre - hw).max(1.0);
-                    let mut k = lo.ceil() as i64;
-                    if k % 2 == 0 {
-                        k += 1;
-                    }
-                    while (k as f64) <= centre + hw {
-                        let kf = k as f64;
-                        let q = jf * jf * c[0] + 2.0 * sign * jf * kf * c[1] + kf * kf * c[2];
-                        let damp = exp_damping(-0.5 * PI * PI * q);
-                        // E[cos(π(jU ± kV))]; the sine product is (cos(−) − cos(+))/2.
-                        e -= sign * 0.5 * (PI * (jf * m[0] + sign * kf * m[1])).cos() * damp / (jf * kf);
-                        k += 2;
-                    }
-                }
+        fourier_band(c, det, |jf, sign, mut k, hi| {
+            let mut run = 0.0;
+            while (k as f64) <= hi {
+                let kf = k as f64;
+                let q = jf * jf * c[0] + 2.0 * sign * jf * kf * c[1] + kf * kf * c[2];
+                run += (PI * (jf * m[0] + sign * kf * m[1])).cos() * exp_damping(-0.5 * PI * PI * q) / kf;
+                k += 2;
             }
-            j += 2;
-        }
-        16.0 / (PI * PI) * e
+            run
+        })
     }
 }
