@@ -38,6 +38,9 @@
 //!   [`CacheConfig::budget_bytes`]. When no room can be made, the lookup evaluates the texels it
 //!   needs directly instead of caching them.
 //! - **Single flight.** Concurrent misses on one tile fill it once; see [`InFlight`].
+//! - **Prefilled tiles.** A caller that computes the texels of several textures laid out alike
+//!   in one pass (a fill says where each texel lies, [`TexelRequest::place`]) hands the others'
+//!   to [`TileCache::prefill`] when the fill ends, and every thread then finds them resident.
 //! - **Hot path.** A hit allocates nothing and takes no lock when the tile is in the calling
 //!   thread's micro-cache ([`CacheConfig::micro_cache`]); otherwise one shard read lock. A
 //!   [`Reader`] (one per thread, as a renderer holds) keeps its recent tiles in a table of its own
