@@ -59,13 +59,8 @@ struct Texture {
     counters: Arc<TextureCounters>,
 }
 
+#[derive(Clone)]
 enum Slot {
-    Ready(Arc<Tile>),
-    Filling(Arc<Flight>),
-}
-
-/// What holds a tile's key that [`TileCache::fill_absent`] found taken.
-enum Occupied {
     Ready(Arc<Tile>),
     Filling(Arc<Flight>),
 }
@@ -519,11 +514,11 @@ impl TileCache {
     {
         match self.fill_absent(t, key, fill, false) {
             Ok(tile) => tile,
-            Err(Occupied::Ready(tile)) => {
+            Err(Slot::Ready(tile)) => {
                 tile.touch();
                 Some(tile)
             }
-            Err(Occupied::Filling(f)) => self.join(t, &key, &f),
+            Err(Slot::Filling(f)) => self.join(t, &key, &f),
         }
     }
 
@@ -547,10 +542,10 @@ impl TileCache {
     }
 
     /// Claims tile `key` (single flight), reserves its bytes, fills it and publishes it;
-    /// `Ok(None)` when the budget has no room (joiners then evaluate directly), `Err` with what
-    /// holds the key when it is taken. `prefill`: for [`TileCache::prefill`], not a request's
+    /// `Ok(None)` when the budget has no room (joiners then evaluate directly), `Err` with the
+    /// slot that holds the key when it is taken. `prefill`: for [`TileCache::prefill`], not a request's
     /// miss.
-    fn fill_absent<F>(&self, t: &Texture, key: Key, fill: &F, prefill: bool) -> Result<Option<Arc<Tile>>, Occupied>
+    fn fill_absent<F>(&self, t: &Texture, key: Key, fill: &F, prefill: bool) -> Result<Option<Arc<Tile>>, Slot>
     where
         F: Fn(TexelRequest) -> Texel + ?Sized,
     {
@@ -559,13 +554,10 @@ impl TileCache {
             Arc::new(Flight { filler: std::thread::current().id(), done: Mutex::new(None), ready: Condvar::new() });
         {
             let mut map = write(shard);
-            match map.get(&key) {
-                Some(Slot::Ready(tile)) => return Err(Occupied::Ready(tile.clone())),
-                Some(Slot::Filling(f)) => return Err(Occupied::Filling(f.clone())),
-                None => {
-                    map.insert(key, Slot::Filling(flight.clone()));
-                }
+            if let Some(taken) = map.get(&key) {
+                return Err(taken.clone());
             }
+            map.insert(key, Slot::Filling(flight.clone()));
         }
         let mut guard = FillGuard { cache: self, key, flight: &flight, armed: true };
         let c = t.counters.level(key.level);

@@ -678,23 +678,13 @@ struct CoFill {
     tile: [i32; 2],
     /// The evaluation's nodes: the filled one first, then its siblings.
     nodes: Vec<NodeId>,
-    /// The siblings' textures (`nodes[1..]`'s).
-    textures: Vec<TextureId>,
     /// The siblings' texels, sibling by sibling, each in the fill's order.
     texels: Vec<[f32; 3]>,
 }
 
 impl Default for CoFill {
     fn default() -> Self {
-        CoFill {
-            graph: 0,
-            node: NodeId(0),
-            level: 0,
-            tile: [0; 2],
-            nodes: Vec::new(),
-            textures: Vec::new(),
-            texels: Vec::new(),
-        }
+        CoFill { graph: 0, node: NodeId(0), level: 0, tile: [0; 2], nodes: Vec::new(), texels: Vec::new() }
     }
 }
 
@@ -717,12 +707,18 @@ impl<'a> CacheAccess<'a> {
         GraphOverride { access: self, graph, level: Cell::new(None) }
     }
 
-    fn fill(&self, graph: u32, node: NodeId, fp: &Footprint) -> Filtered {
+    /// `f` with graph `graph` and a scratch of its pool (taken per call: a fill can need
+    /// another's, which takes its own).
+    fn with_scratch<R>(&self, graph: u32, f: impl FnOnce(&Graph, &mut EvalScratch) -> R) -> R {
         let g = self.graphs[graph as usize].graph();
         let mut scratch = self.pool.borrow_mut()[graph as usize].pop().unwrap_or_else(|| EvalScratch::new(g));
-        let f = g.eval_node_direct(node, fp, &mut scratch, &self.for_graph(graph));
+        let r = f(g, &mut scratch);
         self.pool.borrow_mut()[graph as usize].push(scratch);
-        f
+        r
+    }
+
+    fn fill(&self, graph: u32, node: NodeId, fp: &Footprint) -> Filtered {
+        self.with_scratch(graph, |g, scratch| g.eval_node_direct(node, fp, scratch, &self.for_graph(graph)))
     }
 
     /// The value of texel `req` of `node`'s texture (its channels' means).
@@ -761,22 +757,21 @@ impl<'a> CacheAccess<'a> {
         let Some(at) = at else {
             return mean(&self.fill(graph, node, &fp));
         };
-        let gi = graph as usize;
-        let g = self.graphs[gi].graph();
-        let mut nodes = std::mem::take(&mut self.co_fills.borrow_mut()[at].nodes);
-        // Nested fills (a cached node upstream) push and pop their own entries meanwhile.
-        let mut scratch = self.pool.borrow_mut()[gi].pop().unwrap_or_else(|| EvalScratch::new(g));
+        // Taken out for the evaluation, during which nested fills (a cached node upstream) push
+        // and pop their own entries.
+        let nodes = std::mem::take(&mut self.co_fills.borrow_mut()[at].nodes);
         let mut values = std::mem::take(&mut *self.co_values.borrow_mut());
         values.resize(nodes.len(), Filtered::zero(graph::ValueType::Float));
-        g.eval_nodes_direct(&nodes, &fp, &mut scratch, &self.for_graph(graph), &mut values);
-        self.pool.borrow_mut()[gi].push(scratch);
+        self.with_scratch(graph, |g, scratch| {
+            g.eval_nodes_direct(&nodes, &fp, scratch, &self.for_graph(graph), &mut values)
+        });
         let v = mean(&values[0]);
         let mut fills = self.co_fills.borrow_mut();
         let co = &mut fills[at];
         for (k, f) in values.iter().skip(1).enumerate() {
             co.texels[k * place.count as usize + place.index as usize] = mean(f);
         }
-        std::mem::swap(&mut co.nodes, &mut nodes);
+        co.nodes = nodes;
         drop(fills);
         *self.co_values.borrow_mut() = values;
         if place.index + 1 == place.count {
@@ -792,22 +787,20 @@ impl<'a> CacheAccess<'a> {
         let mut co = self.co_spare.borrow_mut().pop().unwrap_or_default();
         (co.graph, co.node, co.level, co.tile) = (graph, node, level, place.tile);
         co.nodes.clear();
-        co.textures.clear();
         co.nodes.push(node);
         let size = i64::from(nc.cache.config().tile_size);
         let texel = [i64::from(place.tile[0]) * size, i64::from(place.tile[1]) * size];
         for &(s, tex) in &nc.siblings[gi][node.0 as usize] {
             if min_level[s.0 as usize] <= level && !nc.cache.is_resident(tex, level, texel) {
                 co.nodes.push(s);
-                co.textures.push(tex);
             }
         }
-        if co.textures.is_empty() {
+        if co.nodes.len() == 1 {
             self.co_spare.borrow_mut().push(co);
             return;
         }
         co.texels.clear();
-        co.texels.resize(co.textures.len() * place.count as usize, [0.0; 3]);
+        co.texels.resize((co.nodes.len() - 1) * place.count as usize, [0.0; 3]);
         self.co_fills.borrow_mut().push(co);
     }
 
@@ -816,8 +809,9 @@ impl<'a> CacheAccess<'a> {
     fn end_co_fill(&self, place: cache::TilePlace) {
         let Some(co) = self.co_fills.borrow_mut().pop() else { return };
         let n = place.count as usize;
-        for (k, &tex) in co.textures.iter().enumerate() {
-            let texels = &co.texels[k * n..(k + 1) * n];
+        let textures = &self.cache.textures[co.graph as usize];
+        for (&s, texels) in co.nodes[1..].iter().zip(co.texels.chunks_exact(n)) {
+            let tex = textures[s.0 as usize].expect("a sibling is cached");
             self.cache.cache.prefill(tex, co.level, co.tile, &|r: cache::TexelRequest| {
                 let i = r.place.expect("a fill's texels have places").index as usize;
                 texels[i]
