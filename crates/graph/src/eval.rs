@@ -38,6 +38,14 @@ pub trait NodeOverride {
     fn never_answers(&self) -> bool {
         false
     }
+
+    /// Whether [`lookup`](Self::lookup) would answer `node` at `fp`, decided without looking
+    /// it up. Must not say `true` where `lookup` gives `None`. An evaluation whose outputs all
+    /// come from answered nodes asks for those alone, without visiting the rest of the graph
+    /// ([`Graph::eval`]); the default, `false`, always visits it.
+    fn answers(&self, _node: NodeId, _fp: &Footprint) -> bool {
+        false
+    }
 }
 
 /// The override that never answers: plain evaluation.
@@ -60,6 +68,9 @@ impl NodeOverride for NoOverride {
 pub struct EvalOrder {
     nodes: Vec<NodeId>,
     outputs: Vec<OutputId>,
+    /// The nodes the outputs read, each once, last first: the order the general path asks a
+    /// [`NodeOverride`] for them when it answers them all.
+    output_nodes: Vec<NodeId>,
 }
 
 impl EvalOrder {
@@ -440,7 +451,16 @@ impl Graph {
         }
         nodes.sort_unstable();
         nodes.dedup();
-        EvalOrder { nodes, outputs: outputs.to_vec() }
+        let mut output_nodes: Vec<NodeId> = outputs
+            .iter()
+            .filter_map(|o| match self.output(*o).source {
+                Source::Node { node, .. } => Some(node),
+                _ => None,
+            })
+            .collect();
+        output_nodes.sort_unstable_by(|a, b| b.cmp(a));
+        output_nodes.dedup();
+        EvalOrder { nodes, outputs: outputs.to_vec(), output_nodes }
     }
 
     /// Evaluates the order's outputs filtered over `fp`, writing them to `out` (one per output).
@@ -452,6 +472,9 @@ impl Graph {
         ov: &dyn NodeOverride,
         out: &mut [Filtered],
     ) {
+        if !ov.never_answers() && self.eval_answered(order, fp, scratch, ov, out) {
+            return;
+        }
         for &n in &order.nodes {
             scratch.needed[n.0 as usize] = false;
         }
@@ -466,6 +489,43 @@ impl Graph {
             *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
             slot.ty = self.output(*o).ty;
         }
+    }
+
+    /// [`Self::eval`] where `ov` answers every node an output reads: each such node is looked
+    /// up once and nothing else is visited (a render's wide footprints, whose cached outputs are
+    /// all read from tiles, spent most of an evaluation skipping the graph's other nodes one
+    /// unpredictable branch at a time). Returns false, having looked nothing up, otherwise.
+    fn eval_answered(
+        &self,
+        order: &EvalOrder,
+        fp: &Footprint,
+        scratch: &mut EvalScratch,
+        ov: &dyn NodeOverride,
+        out: &mut [Filtered],
+    ) -> bool {
+        // Tiles are filled in the order the general path asks for them, so co-filling and the
+        // cache's counts are what they were.
+        if !order.output_nodes.iter().all(|&node| ov.answers(node, fp)) {
+            return false;
+        }
+        for &node in &order.output_nodes {
+            let i = node.0 as usize;
+            match ov.lookup(node, fp) {
+                Some(v) => scratch.values[i] = v,
+                None => {
+                    // An override that broke its word: the general path asks again.
+                    debug_assert!(false, "a node override said it answers node {i} but gave no value");
+                    return false;
+                }
+            }
+            scratch.stats.lookups[i] += 1;
+        }
+        let ctx_point = is_point(fp);
+        for (slot, o) in out.iter_mut().zip(&order.outputs) {
+            *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
+            slot.ty = self.output(*o).ty;
+        }
+        true
     }
 
     /// Evaluates one output filtered over `fp`.

@@ -875,6 +875,13 @@ impl NodeOverride for GraphOverride<'_, '_> {
         self.access.cache.uncached[self.graph as usize]
     }
 
+    #[inline]
+    fn answers(&self, node: NodeId, fp: &Footprint) -> bool {
+        let nc = self.access.cache;
+        let (g, i) = (self.graph as usize, node.0 as usize);
+        nc.textures[g][i].is_some() && (nc.baked || self.level(fp.cov) >= f32::from(nc.min_level[g][i]))
+    }
+
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
         let tex = nc.textures[self.graph as usize][node.0 as usize]?;

@@ -730,3 +730,101 @@ fn nodes_evaluated_together_equal_each_alone() {
     }
     assert!(sets > 100 && compared > 1000, "{sets} sets, {compared} comparisons");
 }
+
+/// Answers a set of nodes with values of their own (as a cache would), recording the order it is
+/// asked in; `honest` says which it answers when asked beforehand ([`graph::NodeOverride::answers`]),
+/// otherwise it keeps the default (never says).
+struct Recording {
+    answered: Vec<graph::NodeId>,
+    honest: bool,
+    asked: std::cell::RefCell<Vec<graph::NodeId>>,
+    promised: std::cell::Cell<usize>,
+}
+
+impl Recording {
+    fn value(node: graph::NodeId, ty: graph::ValueType) -> Filtered {
+        let mut v = Filtered::zero(ty);
+        for (k, c) in v.ch.iter_mut().enumerate() {
+            c.mean = 0.125 * node.0 as f32 + 0.01 * k as f32;
+        }
+        v
+    }
+}
+
+impl graph::NodeOverride for Recording {
+    fn lookup(&self, node: graph::NodeId, _: &Footprint) -> Option<Filtered> {
+        self.asked.borrow_mut().push(node);
+        self.answered.contains(&node).then(|| Recording::value(node, graph::ValueType::Color3))
+    }
+    fn answers(&self, node: graph::NodeId, _: &Footprint) -> bool {
+        let yes = self.honest && self.answered.contains(&node);
+        self.promised.set(self.promised.get() + usize::from(yes));
+        yes
+    }
+}
+
+/// An evaluation whose outputs all come from nodes an override answers (a render's cached
+/// outputs at wide footprints) asks for those nodes alone: the same values bit for bit, the same
+/// lookups in the same order and the same counts as when the override does not say beforehand
+/// what it answers and the whole graph is visited. On random graphs, random sets of outputs and
+/// of answered nodes (sometimes all the outputs' nodes, sometimes not all), at random footprints.
+#[test]
+fn outputs_answered_by_an_override_read_the_same_as_the_whole_graph() {
+    let mut rng = Rng(0xA25_BE7);
+    let (mut all_answered, mut compared) = (0, 0);
+    for index in 0..300 {
+        let size = 3 + (rng.next_u64() % 30) as usize;
+        let rg = fuzz::random_graph(&mut rng, size, index % 2 == 0);
+        let g = &rg.graph;
+        let outputs: Vec<OutputId> = (0..1 + rng.next_u64() % 4)
+            .map(|_| g.output_id(&g.outputs()[(rng.next_u64() % g.outputs().len() as u64) as usize].name).unwrap())
+            .collect();
+        let order = g.eval_order(&outputs);
+        let output_nodes: Vec<graph::NodeId> = outputs
+            .iter()
+            .filter_map(|o| g.outputs().iter().find(|x| g.output_id(&x.name) == Some(*o)))
+            .filter_map(|o| match o.source {
+                graph::Source::Node { node, .. } => Some(node),
+                _ => None,
+            })
+            .collect();
+        // Every output's node answered in most draws; one of them left out in the others.
+        let mut answered = output_nodes.clone();
+        if rng.next_u64() % 3 == 0 && !answered.is_empty() {
+            answered.remove((rng.next_u64() % answered.len() as u64) as usize);
+        }
+        let others: Vec<graph::NodeId> = g.node_ids().filter(|_| rng.next_u64() % 4 == 0).collect();
+        answered.extend(others);
+        let make = |honest| Recording {
+            answered: answered.clone(),
+            honest,
+            asked: Default::default(),
+            promised: Default::default(),
+        };
+        let (fast, whole) = (make(true), make(false));
+        let (mut sa, mut sb) = (EvalScratch::new(g), EvalScratch::new(g));
+        for k in 0..4 {
+            let uv = fuzz::random_centre(&mut rng);
+            let (l, _) = fuzz::random_footprint(&mut rng);
+            let fp = if k == 0 { Footprint::point(uv) } else { Footprint::new(uv, l * l.transpose()) };
+            let mut a = vec![Filtered::zero(graph::ValueType::Float); outputs.len()];
+            let mut b = a.clone();
+            g.eval(&order, &fp, &mut sa, &fast, &mut a);
+            g.eval(&order, &fp, &mut sb, &whole, &mut b);
+            for (x, y) in a.iter().zip(&b) {
+                let same = x.ty == y.ty
+                    && x.ch.iter().zip(&y.ch).all(|(p, q)| {
+                        let (p, q) = ([p.mean, p.grad.x, p.grad.y, p.var], [q.mean, q.grad.x, q.grad.y, q.var]);
+                        p.iter().zip(&q).all(|(u, v)| u.to_bits() == v.to_bits() || (u.is_nan() && v.is_nan()))
+                    });
+                assert!(same, "graph {index}: asked alone {x:?}, whole graph {y:?}\n{}", rg.listing);
+                compared += 1;
+            }
+        }
+        assert_eq!(*fast.asked.borrow(), *whole.asked.borrow(), "graph {index}: lookups\n{}", rg.listing);
+        assert_eq!(sa.lookups(), sb.lookups(), "graph {index}");
+        assert_eq!(sa.evaluations(), sb.evaluations(), "graph {index}");
+        all_answered += usize::from(output_nodes.iter().all(|n| answered.contains(n)) && fast.promised.get() > 0);
+    }
+    assert!(all_answered > 100 && compared > 1000, "{all_answered} graphs answered whole, {compared} comparisons");
+}
