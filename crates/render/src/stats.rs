@@ -123,6 +123,12 @@ pub struct Counts {
     /// First hits that could have read them but evaluated their own.
     #[serde(default)]
     pub pixel_texture_misses: u64,
+    /// Path vertices whose footprint was computed.
+    #[serde(default)]
+    pub footprints: u64,
+    /// Hits without textures whose footprint no later hit read, never computed.
+    #[serde(default)]
+    pub footprints_skipped: u64,
 }
 
 impl Counts {
@@ -136,6 +142,8 @@ impl Counts {
         self.pixel_texture_evaluations += o.pixel_texture_evaluations;
         self.pixel_texture_reads += o.pixel_texture_reads;
         self.pixel_texture_misses += o.pixel_texture_misses;
+        self.footprints += o.footprints;
+        self.footprints_skipped += o.footprints_skipped;
     }
 }
 
@@ -150,6 +158,8 @@ impl From<&RenderCounts> for Counts {
             pixel_texture_evaluations: c.pixel_texture_evaluations,
             pixel_texture_reads: c.pixel_texture_reads,
             pixel_texture_misses: c.pixel_texture_misses,
+            footprints: c.footprints,
+            footprints_skipped: c.footprints_skipped,
         }
     }
 }

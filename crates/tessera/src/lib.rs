@@ -554,6 +554,12 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
             c.pixel_texture_evaluations
         );
     }
+    if c.footprints_skipped > 0 {
+        eprintln!(
+            "footprints: {} computed, {} skipped (hits without textures that no later hit's textures needed)",
+            c.footprints, c.footprints_skipped
+        );
+    }
     if let Some(nc) = &r.node_cache {
         let t = CacheTotals::of(nc);
         eprintln!(

@@ -111,6 +111,11 @@ pub struct RenderCounts {
     /// silhouette, a seam, more surfaces in the pixel than it keeps, or a value that was not
     /// finite at the pixel centre).
     pub pixel_texture_misses: u64,
+    /// Path vertices whose footprint the estimator computed.
+    pub footprints: u64,
+    /// Hits without textures whose footprint no later hit of the path read, so never computed
+    /// (see `FootprintCarrier` in `crate::integrator::path`).
+    pub footprints_skipped: u64,
 }
 
 impl RenderCounts {
@@ -122,6 +127,8 @@ impl RenderCounts {
         self.clamped_samples += o.clamped_samples;
         self.pixel_texture_evaluations += o.pixel_texture_evaluations;
         self.pixel_texture_reads += o.pixel_texture_reads;
+        self.footprints += o.footprints;
+        self.footprints_skipped += o.footprints_skipped;
         self.pixel_texture_misses += o.pixel_texture_misses;
     }
 }
@@ -191,6 +198,10 @@ pub struct RenderSettings {
     /// centre's footprint there, when the footprint is centred on the pixel centre anyway (the
     /// default filter scale; see `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub per_sample_textures: bool,
+    /// Compute the footprint of every hit as the path reaches it. By default a hit whose
+    /// material has no textures is computed only once a later hit's textures read their
+    /// footprint (never, if none does); the images are the same either way.
+    pub eager_footprints: bool,
 }
 
 /// How wide textures are filtered relative to the path footprint.
@@ -269,6 +280,7 @@ impl RenderSettings {
             window: None,
             keep_sums: false,
             per_sample_textures: false,
+            eager_footprints: false,
         }
     }
 
