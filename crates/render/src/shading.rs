@@ -139,9 +139,58 @@ pub struct TextureEvaluator<S> {
     pub source: S,
 }
 
-/// Most surfaces whose first-hit textures one pixel keeps; samples of a pixel whose camera rays
-/// meet more surfaces evaluate those per sample.
-const FIRST_HITS_KEPT: usize = 4;
+/// Most surfaces whose shared textures one pixel keeps at once. A pixel whose samples meet
+/// more replaces its oldest entry: an entry is a function of the pixel and its key alone, so what
+/// a sample reads does not depend on which entries earlier samples left.
+const FIRST_HITS_KEPT: usize = 8;
+
+/// Most surfaces on a [`PixelKey`]: the textured hit and the perfectly specular ones before it.
+pub(crate) const PIXEL_CHAIN: usize = 4;
+
+/// Which of a pixel's shared texture entries a camera sample reads: the surfaces its path met
+/// from the camera on, every one but the last a perfect mirror or smooth dielectric without
+/// textures, and whether the path reflected or refracted at each. A first hit is a key of one
+/// surface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct PixelKey {
+    shapes: [u32; PIXEL_CHAIN],
+    len: u8,
+    /// Bit `k`: the path refracted at surface `k`.
+    refracted: u8,
+}
+
+impl PixelKey {
+    /// A camera ray's first hit, on `shape`.
+    pub(crate) fn first(shape: u32) -> PixelKey {
+        let mut shapes = [u32::MAX; PIXEL_CHAIN];
+        shapes[0] = shape;
+        PixelKey { shapes, len: 1, refracted: 0 }
+    }
+
+    /// The key of the hit on `shape` that a path with this key reaches after scattering
+    /// specularly at its last surface (`refracted` or reflected); `None` past [`PIXEL_CHAIN`].
+    pub(crate) fn then(&self, refracted: bool, shape: u32) -> Option<PixelKey> {
+        let n = usize::from(self.len);
+        if n >= PIXEL_CHAIN {
+            return None;
+        }
+        let mut k = *self;
+        k.shapes[n] = shape;
+        k.len += 1;
+        k.refracted |= u8::from(refracted) << (n - 1);
+        Some(k)
+    }
+
+    /// The surfaces, from the camera on.
+    pub(crate) fn shapes(&self) -> &[u32] {
+        &self.shapes[..usize::from(self.len)]
+    }
+
+    /// Whether the path refracted (rather than reflected) at surface `k` of [`Self::shapes`].
+    pub(crate) fn refracted_at(&self, k: usize) -> bool {
+        self.refracted >> k & 1 == 1
+    }
+}
 
 /// How far (in standard deviations of the pixel centre's footprint) a sample's own first-hit
 /// footprint centre may lie from the pixel centre's, and by what fraction of its size the
@@ -151,8 +200,16 @@ const FIRST_HITS_KEPT: usize = 4;
 /// terms elsewhere (measured up to 0.4σ near a sphere's pole), where the pixel centre's own is
 /// the better of the two. Across a silhouette, a crease or a uv seam the two are far apart (a
 /// seam moves uv by a whole period), and the sample evaluates its own.
-const SHARE_DISTANCE: f64 = 1.0;
+pub(crate) const SHARE_DISTANCE: f64 = 1.0;
 const SHARE_COVARIANCE: f64 = 1.0;
+
+/// [`SHARE_DISTANCE`] for a hit seen through perfect mirrors and smooth dielectrics. Such a
+/// sample's footprint is not recentred: its hit lies where its film offset (drawn from the pixel
+/// filter) carries it through the specular surfaces, a draw from the footprint itself to first
+/// order. Reading the pixel centre's textures recentres it, as at the first hit (so the pixel
+/// filter blurs the texture once, not twice); 3σ takes 99 % of such samples and still tells a
+/// seam or a different part of the surface from the pixel's own.
+pub(crate) const CHAIN_SHARE_DISTANCE: f64 = 3.0;
 
 /// The textures of one pixel's first hits (see [`TextureEvaluator::begin_pixel`]).
 struct FirstHits {
@@ -160,13 +217,15 @@ struct FirstHits {
     pixel: Option<(u32, u32)>,
     /// How many of `entries` belong to the pixel.
     len: usize,
+    /// The entry replaced next once all are taken.
+    next: usize,
     /// [`FIRST_HITS_KEPT`] entries, allocated once.
     entries: Vec<FirstHit>,
 }
 
 /// One surface's textures at the pixel centre's footprint.
 struct FirstHit {
-    shape: u32,
+    key: PixelKey,
     /// The pixel centre's footprint (uv centre, covariance and its inverse), or `None` when the
     /// centre's ray misses the shape or its textures went non-finite there: then every sample
     /// evaluates its own.
@@ -191,8 +250,9 @@ impl<S: GraphSource> TextureEvaluator<S> {
             first_hits: FirstHits {
                 pixel: None,
                 len: 0,
+                next: 0,
                 entries: (0..FIRST_HITS_KEPT)
-                    .map(|_| FirstHit { shape: u32::MAX, centre: None, outputs: vec![zero; slots] })
+                    .map(|_| FirstHit { key: PixelKey::first(u32::MAX), centre: None, outputs: vec![zero; slots] })
                     .collect(),
             },
             source,
@@ -209,10 +269,17 @@ impl<S: GraphSource> TextureEvaluator<S> {
     /// pixel and the surface alone, so the image does not depend on which samples a render or a
     /// sample pass takes, or in what order), and each sample whose own footprint agrees with it
     /// ([`SHARE_DISTANCE`]) reads them.
+    ///
+    /// A hit the path reached through perfect mirrors and smooth dielectrics without textures
+    /// is shared the same way, keyed by the surfaces met and whether the path reflected or
+    /// refracted at each ([`PixelKey`]): the pixel centre's ray takes the same way to the same
+    /// surface and carries its footprint there, and a sample whose own footprint centre lies
+    /// within [`CHAIN_SHARE_DISTANCE`] of it reads the textures evaluated there.
     #[inline]
     pub(crate) fn begin_pixel(&mut self, x: u32, y: u32) {
         self.first_hits.pixel = Some((x, y));
         self.first_hits.len = 0;
+        self.first_hits.next = 0;
     }
 
     /// The pixel begun last, if one was.
@@ -221,27 +288,30 @@ impl<S: GraphSource> TextureEvaluator<S> {
         self.first_hits.pixel
     }
 
-    /// The entry of the current pixel's first hits on `shape`, if one was made.
+    /// The current pixel's entry for `key`, if one is kept.
     #[inline]
-    pub(crate) fn first_hit(&self, shape: u32) -> Option<usize> {
-        self.first_hits.entries[..self.first_hits.len].iter().position(|e| e.shape == shape)
+    pub(crate) fn first_hit(&self, key: &PixelKey) -> Option<usize> {
+        self.first_hits.entries[..self.first_hits.len].iter().position(|e| e.key == *key)
     }
 
-    /// Keeps `material`'s textures on `shape` at the pixel centre's footprint `centre` (`None`:
-    /// the centre's ray misses the shape) as the pixel's entry for the shape, and says whether
-    /// it evaluated them; `None` when the pixel keeps [`FIRST_HITS_KEPT`] surfaces already.
+    /// Keeps `material`'s textures at the pixel centre's footprint `centre` (`None`: the
+    /// centre's path does not reach the key's last surface the key's way) as the pixel's entry
+    /// for `key`, in a free entry or in place of the oldest; says whether it evaluated them.
     pub(crate) fn keep_first_hit(
         &mut self,
         graphs: &[SceneGraph],
         material: &Material,
-        shape: u32,
+        key: PixelKey,
         centre: Option<Footprint>,
     ) -> Option<(usize, bool)> {
-        let k = self.first_hits.len;
-        if k >= FIRST_HITS_KEPT {
-            return None;
-        }
-        self.first_hits.len += 1;
+        let hits = &mut self.first_hits;
+        let k = if hits.len < FIRST_HITS_KEPT {
+            hits.len += 1;
+            hits.len - 1
+        } else {
+            hits.next = (hits.next + 1) % FIRST_HITS_KEPT;
+            hits.next
+        };
         let n = material.slot_count as usize;
         let mut evaluated = false;
         let kept = centre.and_then(|fp| {
@@ -257,7 +327,7 @@ impl<S: GraphSource> TextureEvaluator<S> {
             finite.then(|| (fp.uv.as_dvec2(), cov, cov.inverse()))
         });
         let e = &mut self.first_hits.entries[k];
-        e.shape = shape;
+        e.key = key;
         e.centre = kept;
         if kept.is_some() {
             e.outputs[..n].copy_from_slice(&self.outputs[..n]);
@@ -265,15 +335,17 @@ impl<S: GraphSource> TextureEvaluator<S> {
         Some((k, evaluated))
     }
 
-    /// Whether a sample whose own first-hit footprint is `fp` reads entry `k`'s textures.
+    /// Whether a sample whose own footprint there is `fp` reads entry `k`'s textures: its
+    /// centre within `distance` of the entry's, in the entry's standard deviations
+    /// ([`SHARE_DISTANCE`] at a first hit, [`CHAIN_SHARE_DISTANCE`] after specular surfaces),
+    /// its covariance within [`SHARE_COVARIANCE`] of the entry's.
     #[inline]
-    pub(crate) fn first_hit_accepts(&self, k: usize, fp: &Footprint) -> bool {
+    pub(crate) fn first_hit_accepts(&self, k: usize, fp: &Footprint, distance: f64) -> bool {
         let Some((uv, cov, inv)) = &self.first_hits.entries[k].centre else { return false };
         let d = fp.uv.as_dvec2() - *uv;
         let dc = fp.cov.as_dmat2() - *cov;
         let frobenius = |m: &DMat2| m.x_axis.length_squared() + m.y_axis.length_squared();
-        d.dot(*inv * d) <= SHARE_DISTANCE * SHARE_DISTANCE
-            && frobenius(&dc) <= SHARE_COVARIANCE * SHARE_COVARIANCE * frobenius(cov)
+        d.dot(*inv * d) <= distance * distance && frobenius(&dc) <= SHARE_COVARIANCE * SHARE_COVARIANCE * frobenius(cov)
     }
 
     /// Entry `k`'s textures, by slot.

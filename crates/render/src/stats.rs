@@ -114,13 +114,14 @@ pub struct Counts {
     /// clamped to it.
     #[serde(default)]
     pub clamped_samples: u64,
-    /// First-hit texture evaluations at pixel centres, shared by the pixels' samples.
+    /// Texture evaluations at pixel centres (first hits and hits through mirrors and glass),
+    /// shared by the pixels' samples.
     #[serde(default)]
     pub pixel_texture_evaluations: u64,
-    /// First hits that read their pixel's shared textures.
+    /// Hits that read their pixel's shared textures.
     #[serde(default)]
     pub pixel_texture_reads: u64,
-    /// First hits that could have read them but evaluated their own.
+    /// Hits that could have read them but evaluated their own.
     #[serde(default)]
     pub pixel_texture_misses: u64,
     /// Path vertices whose footprint was computed.

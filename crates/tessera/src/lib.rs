@@ -128,10 +128,12 @@ struct RenderArgs {
     /// render time (for benchmarks).
     #[arg(long)]
     free_textures: bool,
-    /// Evaluate every sample's first-hit textures at its own footprint. By default the samples
-    /// of a pixel that meet the same surface share one evaluation at the pixel centre's
-    /// footprint (with the default --filter-scale 1, where every sample's footprint is centred
-    /// there anyway): same image up to rounding, fewer evaluations.
+    /// Evaluate every sample's first-hit textures, and those seen through perfect mirrors and
+    /// glass, at its own footprint. By default the samples of a pixel that meet the same
+    /// surface (the same way) share one evaluation at the pixel centre's footprint (with the
+    /// default --filter-scale 1, where every sample's first-hit footprint is centred there
+    /// anyway): same image up to rounding at first hits, textures behind mirrors and glass
+    /// blurred once by the pixel filter instead of twice, fewer evaluations.
     #[arg(long)]
     per_sample_textures: bool,
     /// Texels per uv unit at level 0 for footprint LODs in AOVs.
@@ -548,7 +550,7 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
     }
     if c.pixel_texture_evaluations > 0 {
         eprintln!(
-            "first hits: {} of {} read their pixel's textures, evaluated once per pixel and surface ({} evaluations)",
+            "shared textures: {} of {} first hits and hits through mirrors and glass read their pixel's, evaluated once per pixel and surface ({} evaluations)",
             c.pixel_texture_reads,
             c.pixel_texture_reads + c.pixel_texture_misses,
             c.pixel_texture_evaluations

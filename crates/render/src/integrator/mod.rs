@@ -102,14 +102,15 @@ pub struct RenderCounts {
     pub nonfinite_samples: u64,
     /// Samples with a channel beyond [`crate::film::SAMPLE_LIMIT`], clamped to it.
     pub clamped_samples: u64,
-    /// First-hit texture evaluations at a pixel centre's footprint, one per pixel and surface
-    /// (see `TextureEvaluator::begin_pixel` in `crate::shading`).
+    /// Texture evaluations at a pixel centre's footprint, one per pixel and surface (first hits,
+    /// and hits seen through perfect mirrors and smooth glass; see
+    /// `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub pixel_texture_evaluations: u64,
-    /// Camera samples' first hits that read their pixel's shared textures.
+    /// Hits that read their pixel's shared textures.
     pub pixel_texture_reads: u64,
-    /// First hits that could have shared their pixel's textures but evaluated their own (a
-    /// silhouette, a seam, more surfaces in the pixel than it keeps, or a value that was not
-    /// finite at the pixel centre).
+    /// Hits that could have shared their pixel's textures but evaluated their own (a
+    /// silhouette, a seam, the pixel centre's ray not taking the sample's way through mirrors
+    /// and glass, or a value that was not finite at the pixel centre).
     pub pixel_texture_misses: u64,
     /// Path vertices whose footprint the estimator computed.
     pub footprints: u64,

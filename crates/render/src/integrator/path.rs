@@ -16,7 +16,7 @@ use crate::math::{max_component, Frame, Spectrum};
 use crate::pathfootprint::{shadow_scatter, FootprintMode, PathFootprint};
 use crate::sampling::Rng;
 use crate::scene::Scene;
-use crate::shading::{GraphSource, TextureEvaluator};
+use crate::shading::{GraphSource, PixelKey, TextureEvaluator, CHAIN_SHARE_DISTANCE, SHARE_DISTANCE};
 use crate::texture::ShadeContext;
 use footprint::{LocalGeometry, Vertex};
 use glam::{DMat2, DVec2, DVec3, Mat2, Vec2, Vec3};
@@ -120,7 +120,8 @@ fn first_vertex_shift(
     CentreShift { uv: (local.uv_jacobian * shift).as_vec2(), p: (v.t * shift.x + v.b * shift.y).as_vec3() }
 }
 
-/// Whether camera rays' first hits read their pixel's shared textures: with covariance
+/// Whether camera rays' first hits, and the hits they reach through perfect mirrors and smooth
+/// dielectrics, read their pixel's shared textures: with covariance
 /// footprints centred all the way on the pixel centre (the whole footprint as the filter,
 /// [`recentre_fraction`] 1), unless [`RenderSettings::per_sample_textures`] asks otherwise.
 pub fn shares_pixel_textures(settings: &RenderSettings) -> bool {
@@ -132,8 +133,10 @@ pub fn shares_pixel_textures(settings: &RenderSettings) -> bool {
 /// What a material's textures are filtered over at a hit: the hit as a footprint vertex (none
 /// when footprints are not tracked: textures are then read at a point, the default), the
 /// path's tangent-plane covariance there, and where the filter is centred relative to the hit.
-/// `pixel`: the camera ray's hit with its footprint centred all the way on the pixel centre,
-/// whose textures the pixel's samples share ([`TextureEvaluator::begin_pixel`]).
+/// `pixel`: the key of the pixel's shared textures this hit reads
+/// ([`TextureEvaluator::begin_pixel`]): the camera ray's hit with its footprint centred all the
+/// way on the pixel centre, or a hit the path reached from there through perfect mirrors and
+/// smooth dielectrics without textures.
 #[derive(Clone, Copy, Debug, Default)]
 struct TextureFootprint {
     vertex: Option<Vertex>,
@@ -141,7 +144,7 @@ struct TextureFootprint {
     /// The vertex's uv Jacobian ([`LocalGeometry::uv_jacobian`]; zero without a vertex).
     uv_jacobian: DMat2,
     shift: CentreShift,
-    pixel: bool,
+    pixel: Option<PixelKey>,
 }
 
 /// A vertex the path scattered at whose footprint nothing read: the estimator advances through
@@ -273,7 +276,7 @@ impl<'c> FootprintCarrier<'c> {
         self.catch_up();
         self.computed += 1;
         let next = 1 - self.cur;
-        let (var, uv_jacobian, shift, pixel) = match &self.last {
+        let (var, uv_jacobian, shift) = match &self.last {
             None => {
                 // The first hit's local geometry serves the tracker's start, the recentring and
                 // the texture footprint: computed once (it was four times).
@@ -283,15 +286,15 @@ impl<'c> FootprintCarrier<'c> {
                     PathFootprint::start(settings.footprint, self.camera, self.cam, &v, at, settings.spp);
                 self.states[next] = state;
                 let shift = first_vertex_shift(settings, self.cam, &v, at);
-                (var, local.uv_jacobian, shift, shares_pixel_textures(settings))
+                (var, local.uv_jacobian, shift)
             }
             Some((pv, bs)) => {
                 self.states[next] = self.states[self.cur];
                 let var = self.states[next].advance(pv, bs, d, &v);
-                (var, self.states[next].uv_jacobian(&v), CentreShift::default(), false)
+                (var, self.states[next].uv_jacobian(&v), CentreShift::default())
             }
         };
-        TextureFootprint { vertex: Some(v), var, uv_jacobian, shift, pixel }
+        TextureFootprint { vertex: Some(v), var, uv_jacobian, shift, pixel: None }
     }
 
     /// The path scatters at the hit it arrived at last: it keeps the footprint there (a
@@ -366,8 +369,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                 }
                 None => si.graph_footprint(Mat2::ZERO),
             };
-            if tf.pixel {
-                if let Some(k) = self.pixel_textures(material, si.shape, &fp) {
+            if let Some(key) = &tf.pixel {
+                if let Some(k) = self.pixel_textures(material, key, &fp) {
                     self.counts.pixel_texture_reads += 1;
                     return self.textures.first_hit_outputs(k, material);
                 }
@@ -377,36 +380,63 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         }
     }
 
-    /// The entry of the pixel's shared first-hit textures on `shape` that a camera sample whose
-    /// own footprint there is `fp` reads (made on the pixel's first sample to meet the shape),
-    /// if it may read one.
-    fn pixel_textures(&mut self, material: &'a Material, shape: u32, fp: &graph::Footprint) -> Option<usize> {
-        let k = match self.textures.first_hit(shape) {
+    /// The entry of the pixel's shared textures for `key` that a camera sample whose own
+    /// footprint there is `fp` reads (made on the pixel's first sample to reach it), if it may
+    /// read one.
+    fn pixel_textures(&mut self, material: &'a Material, key: &PixelKey, fp: &graph::Footprint) -> Option<usize> {
+        let k = match self.textures.first_hit(key) {
             Some(k) => k,
             None => {
-                let centre = self.pixel_centre_footprint(shape);
-                let (k, evaluated) = self.textures.keep_first_hit(&self.scene.graphs, material, shape, centre)?;
+                let centre = self.pixel_centre_footprint(key);
+                let (k, evaluated) = self.textures.keep_first_hit(&self.scene.graphs, material, *key, centre)?;
                 self.counts.pixel_texture_evaluations += u64::from(evaluated);
                 k
             }
         };
-        self.textures.first_hit_accepts(k, fp).then_some(k)
+        let distance = if key.shapes().len() == 1 { SHARE_DISTANCE } else { CHAIN_SHARE_DISTANCE };
+        self.textures.first_hit_accepts(k, fp, distance).then_some(k)
     }
 
-    /// The footprint textures on `shape` are filtered over at the first hit of the current
-    /// pixel's centre ray (the camera ray with no film offset), wherever that ray meets the
-    /// shape, in front of it or not; `None` when it misses the shape.
-    fn pixel_centre_footprint(&self, shape: u32) -> Option<graph::Footprint> {
+    /// The footprint textures are filtered over where the current pixel's centre ray (the
+    /// camera ray with no film offset) meets the key's last surface, having met the others
+    /// before it and scattered at each the key's way (reflected or refracted; their materials
+    /// have no textures and perfectly specular BSDFs, so the way is the whole choice). Each
+    /// surface is met wherever the ray meets it, in front of the others or not, as a first hit's
+    /// is. `None` when the ray misses one or cannot scatter the key's way there.
+    fn pixel_centre_footprint(&self, key: &PixelKey) -> Option<graph::Footprint> {
         let scene = self.scene;
         let (x, y) = self.textures.pixel()?;
         let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
-        let hit = scene.accel.intersect_shape(&scene.shapes, &cam.ray, shape)?;
-        let si = interaction(&scene.shapes, &cam.ray, &hit);
-        let v = si.footprint_vertex();
+        let shapes = key.shapes();
+        let mut ray = cam.ray;
+        let hit = scene.accel.intersect_shape(&scene.shapes, &ray, shapes[0])?;
+        let mut si = interaction(&scene.shapes, &ray, &hit);
+        let mut v = si.footprint_vertex();
         let local = v.local();
         let at = (&local, local.geometric_normal(v.n));
-        let (_, var) = PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, at, self.settings.spp);
-        let fp = self.graph_footprint(&si, local.uv_jacobian, var);
+        let (mut state, mut var) =
+            PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, at, self.settings.spp);
+        let mut uv_jacobian = local.uv_jacobian;
+        for (k, &shape) in shapes.iter().enumerate().skip(1) {
+            let material = &scene.materials[scene.shapes[shapes[k - 1] as usize].material as usize];
+            let bsdf = material.bsdf.at(&ShadeContext { uv: si.uv, outputs: &[] });
+            let refracted = key.refracted_at(k - 1);
+            // A smooth dielectric reflects when `u_lobe` is below the Fresnel reflectance.
+            let u_lobe = if refracted { 1.0 - f32::EPSILON / 2.0 } else { 0.0 };
+            let bs = bsdf.sample(si.sh.to_local(-ray.d), u_lobe, Vec2::splat(0.5))?;
+            if bs.kind != LobeKind::Specular || bs.transmitted != refracted {
+                return None;
+            }
+            let d = si.sh.to_world(bs.wo);
+            ray = spawn_ray(&si, d);
+            let hit = scene.accel.intersect_shape(&scene.shapes, &ray, shape)?;
+            let next = interaction(&scene.shapes, &ray, &hit);
+            let nv = next.footprint_vertex();
+            var = state.advance(&v, &bs, d, &nv);
+            uv_jacobian = state.uv_jacobian(&nv);
+            (si, v) = (next, nv);
+        }
+        let fp = self.graph_footprint(&si, uv_jacobian, var);
         (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
     }
 
@@ -446,7 +476,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                     let mut state = *fp;
                     let var = state.advance(cur, bs, shadow.d, &v);
                     let uv_jacobian = state.uv_jacobian(&v);
-                    TextureFootprint { vertex: Some(v), var, uv_jacobian, shift: CentreShift::default(), pixel: false }
+                    TextureFootprint { vertex: Some(v), var, uv_jacobian, shift: CentreShift::default(), pixel: None }
                 }
                 _ => TextureFootprint::default(),
             };
@@ -651,6 +681,12 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
     let mut footprints = FootprintCarrier::new(scene, &settings, cam, O::WANTS_FOOTPRINTS);
     // Surfaces passed straight through since the last scattering vertex.
     let mut passes = 0u32;
+    // While every surface the path scattered at so far was a perfect mirror or smooth
+    // dielectric without textures (and pixels share textures): the key of those surfaces and
+    // whether the path refracted at the last. The next textured hit reads the pixel's textures
+    // for that key.
+    let shares = shares_pixel_textures(&settings);
+    let mut specular: Option<(PixelKey, bool)> = None;
     loop {
         tracer.textures.depth = depth;
         tracer.counts.rays += 1;
@@ -670,7 +706,12 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         let full = footprints.track || O::WANTS_FOOTPRINTS || material.reads_uv();
         let si = interaction_with(&scene.shapes, &ray, &hit, full);
         // The footprint here; the path keeps it only if it scatters here.
-        let here = footprints.arrive(&settings, &si, ray.d, !material.graphs.is_empty());
+        let mut here = footprints.arrive(&settings, &si, ray.d, !material.graphs.is_empty());
+        here.pixel = if depth == 0 {
+            shares.then(|| PixelKey::first(hit.shape))
+        } else {
+            specular.and_then(|(key, refracted)| key.then(refracted, hit.shape))
+        };
         if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {
             result += l;
         }
@@ -749,6 +790,14 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         last = LastScatter { p: si.p, pdf: bs.pdf * scatter_pdf, delta: matches!(bs.kind, LobeKind::Specular) };
         ray = spawn_ray(&si, si.sh.to_world(bs.wo));
         depth += 1;
+        specular = match here.pixel {
+            Some(key)
+                if shares && bs.kind == LobeKind::Specular && material.graphs.is_empty() && !bsdf.has_smooth() =>
+            {
+                Some((key, bs.transmitted))
+            }
+            _ => None,
+        };
         footprints.sampled(&here, bs);
 
         if depth >= path.rr_depth {
