@@ -192,24 +192,15 @@ impl PixelKey {
     }
 }
 
-/// How far (in standard deviations of the pixel centre's footprint) a sample's own first-hit
-/// footprint centre may lie from the pixel centre's, and by what fraction of its size the
-/// covariance may differ, for the sample to read the pixel's textures. A sample's own footprint
-/// is the pixel centre's extrapolated along the tangent plane at the sample's hit, exact on a
-/// plane (the two agree to rounding) and off by the curvature's and the uv map's second-order
-/// terms elsewhere (measured up to 0.4σ near a sphere's pole), where the pixel centre's own is
-/// the better of the two. Across a silhouette, a crease or a uv seam the two are far apart (a
-/// seam moves uv by a whole period), and the sample evaluates its own.
-pub(crate) const SHARE_DISTANCE: f64 = 1.0;
-const SHARE_COVARIANCE: f64 = 1.0;
-
-/// [`SHARE_DISTANCE`] for a hit seen through perfect mirrors and smooth dielectrics. Such a
-/// sample's footprint is not recentred: its hit lies where its film offset (drawn from the pixel
-/// filter) carries it through the specular surfaces, a draw from the footprint itself to first
-/// order. Reading the pixel centre's textures recentres it, as at the first hit (so the pixel
-/// filter blurs the texture once, not twice); 3σ takes 99 % of such samples and still tells a
-/// seam or a different part of the surface from the pixel's own.
-pub(crate) const CHAIN_SHARE_DISTANCE: f64 = 3.0;
+/// How far (in standard deviations of the pixel centre's footprint there) a sample's hit may
+/// lie from the pixel centre's, in texture coordinates, for the sample to read the pixel's
+/// textures. A sample's hit is its film offset (drawn from the pixel filter) carried onto the
+/// surface, through any perfect mirrors and smooth dielectrics on the way: a draw from the
+/// footprint itself, to first order. 4σ takes 99.97 % of them and still tells a uv seam (a whole
+/// period away), a silhouette or a different part of the surface from the pixel's own; a sample
+/// beyond evaluates its own. The test reads the hit's texture coordinates alone, so a sample
+/// that reads the pixel's textures needs no footprint of its own there.
+pub(crate) const SHARE_DISTANCE: f64 = 4.0;
 
 /// The textures of one pixel's first hits (see [`TextureEvaluator::begin_pixel`]).
 struct FirstHits {
@@ -267,14 +258,13 @@ impl<S: GraphSource> TextureEvaluator<S> {
     /// pixel that meets the same surface asks for the same filtered textures. They are
     /// evaluated once, at the footprint the pixel centre's own ray has there (a function of the
     /// pixel and the surface alone, so the image does not depend on which samples a render or a
-    /// sample pass takes, or in what order), and each sample whose own footprint agrees with it
-    /// ([`SHARE_DISTANCE`]) reads them.
+    /// sample pass takes, or in what order), and each sample whose hit lies near the pixel
+    /// centre's ([`SHARE_DISTANCE`]) reads them.
     ///
     /// A hit the path reached through perfect mirrors and smooth dielectrics without textures
     /// is shared the same way, keyed by the surfaces met and whether the path reflected or
     /// refracted at each ([`PixelKey`]): the pixel centre's ray takes the same way to the same
-    /// surface and carries its footprint there, and a sample whose own footprint centre lies
-    /// within [`CHAIN_SHARE_DISTANCE`] of it reads the textures evaluated there.
+    /// surface and carries its footprint there.
     #[inline]
     pub(crate) fn begin_pixel(&mut self, x: u32, y: u32) {
         self.first_hits.pixel = Some((x, y));
@@ -335,17 +325,14 @@ impl<S: GraphSource> TextureEvaluator<S> {
         Some((k, evaluated))
     }
 
-    /// Whether a sample whose own footprint there is `fp` reads entry `k`'s textures: its
-    /// centre within `distance` of the entry's, in the entry's standard deviations
-    /// ([`SHARE_DISTANCE`] at a first hit, [`CHAIN_SHARE_DISTANCE`] after specular surfaces),
-    /// its covariance within [`SHARE_COVARIANCE`] of the entry's.
+    /// Whether a sample whose hit has texture coordinates `uv` reads entry `k`'s textures: `uv`
+    /// within [`SHARE_DISTANCE`] of the entry's centre, in the standard deviations of the
+    /// entry's footprint.
     #[inline]
-    pub(crate) fn first_hit_accepts(&self, k: usize, fp: &Footprint, distance: f64) -> bool {
-        let Some((uv, cov, inv)) = &self.first_hits.entries[k].centre else { return false };
-        let d = fp.uv.as_dvec2() - *uv;
-        let dc = fp.cov.as_dmat2() - *cov;
-        let frobenius = |m: &DMat2| m.x_axis.length_squared() + m.y_axis.length_squared();
-        d.dot(*inv * d) <= distance * distance && frobenius(&dc) <= SHARE_COVARIANCE * SHARE_COVARIANCE * frobenius(cov)
+    pub(crate) fn first_hit_accepts(&self, k: usize, uv: glam::Vec2) -> bool {
+        let Some((centre, _, inv)) = &self.first_hits.entries[k].centre else { return false };
+        let d = uv.as_dvec2() - *centre;
+        d.dot(*inv * d) <= SHARE_DISTANCE * SHARE_DISTANCE
     }
 
     /// Entry `k`'s textures, by slot.

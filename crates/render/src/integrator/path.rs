@@ -16,7 +16,7 @@ use crate::math::{max_component, Frame, Spectrum};
 use crate::pathfootprint::{shadow_scatter, FootprintMode, PathFootprint};
 use crate::sampling::Rng;
 use crate::scene::Scene;
-use crate::shading::{GraphSource, PixelKey, TextureEvaluator, CHAIN_SHARE_DISTANCE, SHARE_DISTANCE};
+use crate::shading::{GraphSource, PixelKey, TextureEvaluator};
 use crate::texture::ShadeContext;
 use footprint::{LocalGeometry, Vertex};
 use glam::{DMat2, DVec2, DVec3, Mat2, Vec2, Vec3};
@@ -145,6 +145,9 @@ struct TextureFootprint {
     uv_jacobian: DMat2,
     shift: CentreShift,
     pixel: Option<PixelKey>,
+    /// The pixel's entry whose textures this hit reads (decided before its footprint, which it
+    /// then does not need: see [`Tracer::shared_entry`]).
+    shared: Option<usize>,
 }
 
 /// A vertex the path scattered at whose footprint nothing read: the estimator advances through
@@ -164,12 +167,13 @@ const DEFERRED: usize = 4;
 /// The footprint a camera path carries from vertex to vertex (pbrt carries its ray
 /// differentials the same way).
 ///
-/// Footprints are computed only where read. A hit whose material has no textures (and whose
-/// footprint neither the observer nor a shadow ray's crossings read) is deferred: the estimator
-/// advances through it, with the same arithmetic in the same order, when a later hit's textures
-/// need their footprint, and never if none does. A quarter to two fifths of the footprints of
-/// scenes with untextured walls, mirrors and glass were computed for nothing (a path leaving a
-/// textured floor for a plain wall and the sky).
+/// Footprints are computed only where read. A hit whose material has no textures, or whose
+/// textures come from its pixel's shared evaluation (decided from its texture coordinates
+/// alone), and whose footprint neither the observer nor a shadow ray's crossings read, is
+/// deferred: the estimator advances through it, with the same arithmetic in the same order,
+/// when a later hit's textures need their footprint, and never if none does. Most camera
+/// paths' footprints were computed for nothing: a first hit that reads its pixel's textures,
+/// then a plain wall and the sky.
 struct FootprintCarrier<'c> {
     /// Whether footprints are tracked at all: they cost a few hundred nanoseconds per bounce, so
     /// only when a material's textures or the observer will read them.
@@ -261,8 +265,8 @@ impl<'c> FootprintCarrier<'c> {
     /// The footprint at hit `si`, carried along direction `d` from the last scattering vertex
     /// (or the camera); on the camera ray, textures are filtered around the pixel centre's hit.
     /// The estimator's state there is kept aside until the path scatters at `si`. Where
-    /// `read` is false (the hit's material has no textures) the footprint may be deferred: the
-    /// answer then has the vertex alone.
+    /// `read` is false (the hit's material has no textures, or reads its pixel's) the footprint
+    /// may be deferred: the answer then has the vertex alone.
     fn arrive(&mut self, settings: &RenderSettings, si: &SurfaceInteraction, d: Vec3, read: bool) -> TextureFootprint {
         if !self.track {
             return TextureFootprint::default();
@@ -294,7 +298,7 @@ impl<'c> FootprintCarrier<'c> {
                 (var, self.states[next].uv_jacobian(&v), CentreShift::default())
             }
         };
-        TextureFootprint { vertex: Some(v), var, uv_jacobian, shift, pixel: None }
+        TextureFootprint { vertex: Some(v), var, uv_jacobian, shift, pixel: None, shared: None }
     }
 
     /// The path scatters at the hit it arrived at last: it keeps the footprint there (a
@@ -359,6 +363,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
             &[]
         } else if self.settings.free_textures {
             &material.constant_outputs
+        } else if let Some(k) = tf.shared {
+            self.textures.first_hit_outputs(k, material)
         } else {
             let fp = match &tf.vertex {
                 Some(_) => {
@@ -369,21 +375,17 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                 }
                 None => si.graph_footprint(Mat2::ZERO),
             };
-            if let Some(key) = &tf.pixel {
-                if let Some(k) = self.pixel_textures(material, key, &fp) {
-                    self.counts.pixel_texture_reads += 1;
-                    return self.textures.first_hit_outputs(k, material);
-                }
-                self.counts.pixel_texture_misses += 1;
-            }
             self.textures.evaluate(&self.scene.graphs, material, &fp)
         }
     }
 
-    /// The entry of the pixel's shared textures for `key` that a camera sample whose own
-    /// footprint there is `fp` reads (made on the pixel's first sample to reach it), if it may
-    /// read one.
-    fn pixel_textures(&mut self, material: &'a Material, key: &PixelKey, fp: &graph::Footprint) -> Option<usize> {
+    /// The entry of the pixel's shared textures for `key` (made on the pixel's first sample to
+    /// reach it) that a sample whose hit on the key's last surface has texture coordinates `uv`
+    /// reads, if it may read one: where `uv` lies within [`SHARE_DISTANCE`] of the entry's
+    /// centre. Decided from `uv` alone, before the sample's own footprint there, which a sample
+    /// that reads the entry then does not need (it is computed only if a later hit reads
+    /// textures).
+    fn shared_entry(&mut self, material: &'a Material, key: &PixelKey, uv: Vec2) -> Option<usize> {
         let k = match self.textures.first_hit(key) {
             Some(k) => k,
             None => {
@@ -393,8 +395,13 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                 k
             }
         };
-        let distance = if key.shapes().len() == 1 { SHARE_DISTANCE } else { CHAIN_SHARE_DISTANCE };
-        self.textures.first_hit_accepts(k, fp, distance).then_some(k)
+        let read = self.textures.first_hit_accepts(k, uv);
+        if read {
+            self.counts.pixel_texture_reads += 1;
+        } else {
+            self.counts.pixel_texture_misses += 1;
+        }
+        read.then_some(k)
     }
 
     /// The footprint textures are filtered over where the current pixel's centre ray (the
@@ -476,7 +483,14 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                     let mut state = *fp;
                     let var = state.advance(cur, bs, shadow.d, &v);
                     let uv_jacobian = state.uv_jacobian(&v);
-                    TextureFootprint { vertex: Some(v), var, uv_jacobian, shift: CentreShift::default(), pixel: None }
+                    TextureFootprint {
+                        vertex: Some(v),
+                        var,
+                        uv_jacobian,
+                        shift: CentreShift::default(),
+                        pixel: None,
+                        shared: None,
+                    }
                 }
                 _ => TextureFootprint::default(),
             };
@@ -705,13 +719,21 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         // The surface's parametrisation only where a texture, a footprint or the observer reads it.
         let full = footprints.track || O::WANTS_FOOTPRINTS || material.reads_uv();
         let si = interaction_with(&scene.shapes, &ray, &hit, full);
-        // The footprint here; the path keeps it only if it scatters here.
-        let mut here = footprints.arrive(&settings, &si, ray.d, !material.graphs.is_empty());
-        here.pixel = if depth == 0 {
+        // The pixel's shared textures this hit reads, if any: decided before its footprint, which
+        // it then needs only if a later hit reads textures.
+        let key = if depth == 0 {
             shares.then(|| PixelKey::first(hit.shape))
         } else {
             specular.and_then(|(key, refracted)| key.then(refracted, hit.shape))
         };
+        let textured = !material.graphs.is_empty();
+        let shared = match &key {
+            Some(key) if textured && !settings.free_textures => tracer.shared_entry(material, key, si.uv),
+            _ => None,
+        };
+        // The footprint here; the path keeps it only if it scatters here.
+        let mut here = footprints.arrive(&settings, &si, ray.d, textured && shared.is_none());
+        (here.pixel, here.shared) = (key, shared);
         if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {
             result += l;
         }

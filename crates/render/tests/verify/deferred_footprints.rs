@@ -1,5 +1,5 @@
-//! Footprints deferred at hits without textures: the estimator advances through such a hit only
-//! when a later hit's textures read their footprint. Images must be bit for bit those of
+//! Footprints deferred at hits without textures or that read their pixel's shared textures: the
+//! estimator advances through such a hit only when a later hit's textures read their footprint. Images must be bit for bit those of
 //! computing every footprint as the path reaches it, at any thread count; only the work differs.
 
 use render::integrator::{render, RenderOutput, RenderSettings};
@@ -65,6 +65,7 @@ fn deferred_footprints_change_the_work_but_not_the_image() {
         ("marble", demo("marble")),
         ("rusted_metal", demo("rusted_metal")),
         ("poster_wall", demo("poster_wall")),
+        ("wood_floor", demo("wood_floor")),
         ("box", box_with_patch()),
     ];
     for (name, scene) in &cases {
@@ -79,8 +80,10 @@ fn deferred_footprints_change_the_work_but_not_the_image() {
             // Every hit's footprint is either computed (when reached or later) or skipped.
             assert_eq!(l + s, e, "{name}, {threads} threads: {l} computed + {s} skipped against {e} eager");
             // These scenes have plain walls, mirrors or glass that paths leave for the sky or a
-            // light without meeting a texture again.
-            assert!(s as f64 > 0.03 * e as f64, "{name}: only {s} of {e} footprints skipped");
+            // light without meeting a texture again, and first hits that read their pixel's
+            // textures; the wood floor's paths almost never meet a texture after the first hit.
+            let least = if *name == "wood_floor" { 0.9 } else { 0.03 };
+            assert!(s as f64 > least * e as f64, "{name}: only {s} of {e} footprints skipped");
             eprintln!("{name}, {threads} threads: {s} of {e} footprints skipped");
         }
     }
