@@ -484,8 +484,13 @@ impl Graph {
             }
         }
         self.run(&order.nodes, &[], fp, scratch, ov);
+        self.resolve_outputs(order, fp, scratch, out);
+    }
+
+    /// Reads the order's outputs from their nodes' values in `scratch` into `out`.
+    fn resolve_outputs(&self, order: &EvalOrder, fp: &Footprint, scratch: &mut EvalScratch, out: &mut [Filtered]) {
+        let ctx_point = is_point(fp);
         for (slot, o) in out.iter_mut().zip(&order.outputs) {
-            let ctx_point = is_point(fp);
             *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
             slot.ty = self.output(*o).ty;
         }
@@ -520,11 +525,7 @@ impl Graph {
             }
             scratch.stats.lookups[i] += 1;
         }
-        let ctx_point = is_point(fp);
-        for (slot, o) in out.iter_mut().zip(&order.outputs) {
-            *slot = self.resolve(&self.output(*o).source, fp, ctx_point, scratch);
-            slot.ty = self.output(*o).ty;
-        }
+        self.resolve_outputs(order, fp, scratch, out);
         true
     }
 

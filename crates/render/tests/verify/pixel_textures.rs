@@ -11,8 +11,7 @@ use std::path::{Path, PathBuf};
 /// against the floor and the sky), lit by a sun and a dim sky; one bounce, so every texture
 /// evaluation is a camera ray's first hit.
 fn scene() -> render::scene::Scene {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let texture = r#"<texture type="mtlx" name="reflectance"><string name="filename" value="checker.mtlx"/><string name="output" value="NG_checker/out"/></texture>"#;
+    let texture = CHECKER;
     let xml = format!(
         r#"<scene version="3.0.0">
         <integrator type="path"><integer name="max_depth" value="2"/></integrator>
@@ -31,7 +30,35 @@ fn scene() -> render::scene::Scene {
         <emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>
     </scene>"#
     );
-    render::loader::load_str(&xml, Path::new("pixel_textures.xml"), &data, &[]).unwrap_or_else(|e| panic!("{e}"))
+    load(&xml, "pixel_textures.xml")
+}
+
+/// The checkerboard texture both scenes' floors read.
+const CHECKER: &str = r#"<texture type="mtlx" name="reflectance"><string name="filename" value="checker.mtlx"/><string name="output" value="NG_checker/out"/></texture>"#;
+
+/// Loads a scene written in `xml` as the file `name` of the render tests' data folder.
+fn load(xml: &str, name: &str) -> render::scene::Scene {
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    render::loader::load_str(xml, Path::new(name), &data, &[]).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// The image at another thread count, and the sums of two sample passes merged, are bit for
+/// bit the whole render's (`spp` samples, seed `seed`).
+fn assert_order_free(scene: &render::scene::Scene, spp: u32, seed: u64) {
+    let whole = run(scene, spp, seed, false);
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
+    let threaded = pool.install(|| run(scene, spp, seed, false));
+    assert_eq!(whole.image.pixels, threaded.image.pixels);
+    let sums = |range| {
+        let s = RenderSettings { sample_range: range, keep_sums: true, ..RenderSettings::new(spp, seed) };
+        render(scene, s, &|_| {}).sums.unwrap()
+    };
+    let (all, p, q) = (sums(None), sums(Some((0, spp / 3))), sums(Some((spp / 3, spp))));
+    for ((a, b), c) in p.iter().zip(&q).zip(&all) {
+        let mut m = *a;
+        m.merge(b);
+        assert_eq!(m, *c);
+    }
 }
 
 fn run(scene: &render::scene::Scene, spp: u32, seed: u64, per_sample: bool) -> RenderOutput {
@@ -86,29 +113,13 @@ fn narrower_filters_evaluate_per_sample() {
 /// surface alone, not on which of its samples came first.
 #[test]
 fn shared_textures_do_not_depend_on_sample_order_or_threads() {
-    let scene = scene();
-    let whole = run(&scene, 6, 8, false);
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
-    let threaded = pool.install(|| run(&scene, 6, 8, false));
-    assert_eq!(whole.image.pixels, threaded.image.pixels);
-    let part = |a, b| {
-        let s = RenderSettings { sample_range: Some((a, b)), keep_sums: true, ..RenderSettings::new(6, 8) };
-        render(&scene, s, &|_| {}).sums.unwrap()
-    };
-    let all = render(&scene, RenderSettings { keep_sums: true, ..RenderSettings::new(6, 8) }, &|_| {}).sums.unwrap();
-    let (p, q) = (part(0, 2), part(2, 6));
-    for ((a, b), c) in p.iter().zip(&q).zip(&all) {
-        let mut m = *a;
-        m.merge(b);
-        assert_eq!(m, *c);
-    }
+    assert_order_free(&scene(), 6, 8);
 }
 
 /// The checkered floor seen only through a tilted flat mirror and a glass ball (camera rays meet
 /// the floor after one or more perfectly specular surfaces), under a dim sky.
 fn scene_through_specular() -> render::scene::Scene {
-    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
-    let texture = r#"<texture type="mtlx" name="reflectance"><string name="filename" value="checker.mtlx"/><string name="output" value="NG_checker/out"/></texture>"#;
+    let texture = CHECKER;
     let xml = format!(
         r#"<scene version="3.0.0">
         <integrator type="path"><integer name="max_depth" value="6"/></integrator>
@@ -131,7 +142,7 @@ fn scene_through_specular() -> render::scene::Scene {
         <emitter type="constant"><rgb name="radiance" value="0.2"/></emitter>
     </scene>"#
     );
-    render::loader::load_str(&xml, Path::new("specular.xml"), &data, &[]).unwrap_or_else(|e| panic!("{e}"))
+    load(&xml, "specular.xml")
 }
 
 /// Behind perfect mirrors and smooth glass, the samples of a pixel that take the same way to a
@@ -167,18 +178,5 @@ fn textures_behind_mirrors_and_glass_are_shared_by_the_pixel() {
     assert!(c.pixel_texture_reads > c.samples / 2, "{} reads of {} samples", c.pixel_texture_reads, c.samples);
     assert!(n_shared * 3 < n_own, "evaluations: shared {n_shared}, per sample {n_own}");
     assert!(shared.image.pixels.iter().all(|p| p.is_finite()));
-    // Order and threads: passes merged and another thread count give the same sums.
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(3).build().unwrap();
-    let threaded = pool.install(|| run(&scene, spp, 5, false));
-    assert_eq!(shared.image.pixels, threaded.image.pixels);
-    let sums = |range| {
-        let s = RenderSettings { sample_range: range, keep_sums: true, ..RenderSettings::new(spp, 5) };
-        render(&scene, s, &|_| {}).sums.unwrap()
-    };
-    let (all, p, q) = (sums(None), sums(Some((0, 3))), sums(Some((3, spp))));
-    for ((a, b), c) in p.iter().zip(&q).zip(&all) {
-        let mut m = *a;
-        m.merge(b);
-        assert_eq!(m, *c);
-    }
+    assert_order_free(&scene, spp, 5);
 }
