@@ -499,7 +499,9 @@ impl Graph {
     /// [`Self::eval`] where `ov` answers every node an output reads: each such node is looked
     /// up once and nothing else is visited (a render's wide footprints, whose cached outputs are
     /// all read from tiles, spent most of an evaluation skipping the graph's other nodes one
-    /// unpredictable branch at a time). Returns false, having looked nothing up, otherwise.
+    /// unpredictable branch at a time). Returns false otherwise, having looked nothing up
+    /// (unless the override broke its word: said it answers a node, then gave `None`; the
+    /// general path then asks again).
     fn eval_answered(
         &self,
         order: &EvalOrder,

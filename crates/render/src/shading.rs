@@ -202,7 +202,7 @@ impl PixelKey {
 /// that reads the pixel's textures needs no footprint of its own there.
 pub(crate) const SHARE_DISTANCE: f64 = 4.0;
 
-/// The textures of one pixel's first hits (see [`TextureEvaluator::begin_pixel`]).
+/// One pixel's shared textures, by [`PixelKey`] (see [`TextureEvaluator::begin_pixel`]).
 struct FirstHits {
     /// The pixel, once [`TextureEvaluator::begin_pixel`] named it; without one nothing is shared.
     pixel: Option<(u32, u32)>,
@@ -214,14 +214,26 @@ struct FirstHits {
     entries: Vec<FirstHit>,
 }
 
-/// One surface's textures at the pixel centre's footprint.
+/// One key's textures at the pixel centre's footprint there.
 struct FirstHit {
     key: PixelKey,
-    /// The pixel centre's footprint (uv centre, covariance and its inverse), or `None` when the
-    /// centre's ray misses the shape or its textures went non-finite there: then every sample
+    /// Where the pixel centre's ray reaches the key's last surface, or `None` when it misses it
+    /// (or cannot take the key's way) or the textures went non-finite there: then every sample
     /// evaluates its own.
-    centre: Option<(DVec2, DMat2, DMat2)>,
+    centre: Option<Centre>,
     outputs: Vec<Filtered>,
+}
+
+/// The pixel centre's hit of a [`FirstHit`], as [`TextureEvaluator::first_hit_accepts`] reads it.
+#[derive(Clone, Copy, Debug)]
+struct Centre {
+    /// Texture coordinates and the inverse of the footprint's uv covariance.
+    uv: DVec2,
+    inv: DMat2,
+    /// Position, and the squared distance from it within which a sample's hit may lie
+    /// ([`SHARE_DISTANCE`] times the footprint's larger standard deviation, squared).
+    p: glam::Vec3,
+    reach2: f32,
 }
 
 impl<S: GraphSource> TextureEvaluator<S> {
@@ -292,19 +304,20 @@ impl<S: GraphSource> TextureEvaluator<S> {
         graphs: &[SceneGraph],
         material: &Material,
         key: PixelKey,
-        centre: Option<Footprint>,
+        centre: Option<(Footprint, f64)>,
     ) -> Option<(usize, bool)> {
         let hits = &mut self.first_hits;
         let k = if hits.len < FIRST_HITS_KEPT {
             hits.len += 1;
             hits.len - 1
         } else {
-            hits.next = (hits.next + 1) % FIRST_HITS_KEPT;
-            hits.next
+            let oldest = hits.next;
+            hits.next = (oldest + 1) % FIRST_HITS_KEPT;
+            oldest
         };
         let n = material.slot_count as usize;
         let mut evaluated = false;
-        let kept = centre.and_then(|fp| {
+        let kept = centre.and_then(|(fp, spread)| {
             let cov = fp.cov.as_dmat2();
             let det = cov.determinant();
             if !(det > 0.0 && det.is_finite()) {
@@ -314,7 +327,8 @@ impl<S: GraphSource> TextureEvaluator<S> {
             let finite = self.evaluate_outputs(graphs, material, &fp);
             evaluated = true;
             self.source.shared(false);
-            finite.then(|| (fp.uv.as_dvec2(), cov, cov.inverse()))
+            let reach2 = (SHARE_DISTANCE * SHARE_DISTANCE * spread) as f32;
+            finite.then(|| Centre { uv: fp.uv.as_dvec2(), inv: cov.inverse(), p: fp.geom.p, reach2 })
         });
         let e = &mut self.first_hits.entries[k];
         e.key = key;
@@ -325,14 +339,16 @@ impl<S: GraphSource> TextureEvaluator<S> {
         Some((k, evaluated))
     }
 
-    /// Whether a sample whose hit has texture coordinates `uv` reads entry `k`'s textures: `uv`
-    /// within [`SHARE_DISTANCE`] of the entry's centre, in the standard deviations of the
-    /// entry's footprint.
+    /// Whether a sample whose hit has texture coordinates `uv` and position `p` reads entry
+    /// `k`'s textures: `uv` within [`SHARE_DISTANCE`] of the entry's centre, in the standard
+    /// deviations of the entry's footprint, and `p` as near the centre's hit in space (measured
+    /// along the footprint's wider axis: a guard where texture coordinates repeat over the
+    /// surface, as on overlapping or mirrored uv islands or a mesh without uv).
     #[inline]
-    pub(crate) fn first_hit_accepts(&self, k: usize, uv: glam::Vec2) -> bool {
-        let Some((centre, _, inv)) = &self.first_hits.entries[k].centre else { return false };
-        let d = uv.as_dvec2() - *centre;
-        d.dot(*inv * d) <= SHARE_DISTANCE * SHARE_DISTANCE
+    pub(crate) fn first_hit_accepts(&self, k: usize, uv: glam::Vec2, p: glam::Vec3) -> bool {
+        let Some(c) = &self.first_hits.entries[k].centre else { return false };
+        let d = uv.as_dvec2() - c.uv;
+        d.dot(c.inv * d) <= SHARE_DISTANCE * SHARE_DISTANCE && p.distance_squared(c.p) <= c.reach2
     }
 
     /// Entry `k`'s textures, by slot.

@@ -127,7 +127,7 @@ pub struct Counts {
     /// Path vertices whose footprint was computed.
     #[serde(default)]
     pub footprints: u64,
-    /// Hits without textures whose footprint no later hit read, never computed.
+    /// Hits whose footprint nothing read, there or later, never computed.
     #[serde(default)]
     pub footprints_skipped: u64,
 }

@@ -558,7 +558,7 @@ fn print_summary(job: &RenderJob, scene: &Scene, r: &Rendered, images: &[PathBuf
     }
     if c.footprints_skipped > 0 {
         eprintln!(
-            "footprints: {} computed, {} skipped (hits without textures that no later hit's textures needed)",
+            "footprints: {} computed, {} never needed (no texture read them, at their hit or later on the path)",
             c.footprints, c.footprints_skipped
         );
     }

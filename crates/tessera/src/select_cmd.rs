@@ -125,7 +125,8 @@ pub fn profile_scene(scene: &Scene, settings: RenderSettings, pixel_fraction: f6
 /// [`MIN_PROFILE_SAMPLES`]) traced with one sample each on a hashed subset of the pixels (a
 /// quarter of them take a second, timed sample; see docs/selective-caching.md), or more samples
 /// per pixel when every pixel is traced. Where the final render's samples share their pixel's
-/// first-hit textures (the default), those evaluations, one per pixel whatever the sample count,
+/// textures (the default: first hits, and hits behind perfect mirrors and glass), those
+/// evaluations, one per pixel whatever the sample count,
 /// are most of its texture time, and every profile sample pays one: a share of the samples was
 /// a share of the first-hit evaluations `spp` times as large (a quarter of them for a 128² image
 /// at 16 spp). Where they do not share them (`--per-sample-textures`, other footprints or

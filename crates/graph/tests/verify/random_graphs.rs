@@ -751,13 +751,21 @@ impl Recording {
     }
 }
 
-impl graph::NodeOverride for Recording {
-    fn lookup(&self, node: graph::NodeId, _: &Footprint) -> Option<Filtered> {
-        self.asked.borrow_mut().push(node);
-        self.answered.contains(&node).then(|| Recording::value(node, graph::ValueType::Color3))
+impl Recording {
+    /// Whether `node` is answered at `fp`: odd nodes only at footprints of some width (as a
+    /// cache answers only from its plan's coarsest levels on).
+    fn answering(&self, node: graph::NodeId, fp: &Footprint) -> bool {
+        self.answered.contains(&node) && (node.0 % 2 == 0 || fp.cov.determinant() > 1e-8)
     }
-    fn answers(&self, node: graph::NodeId, _: &Footprint) -> bool {
-        let yes = self.honest && self.answered.contains(&node);
+}
+
+impl graph::NodeOverride for Recording {
+    fn lookup(&self, node: graph::NodeId, fp: &Footprint) -> Option<Filtered> {
+        self.asked.borrow_mut().push(node);
+        self.answering(node, fp).then(|| Recording::value(node, graph::ValueType::Color3))
+    }
+    fn answers(&self, node: graph::NodeId, fp: &Footprint) -> bool {
+        let yes = self.honest && self.answering(node, fp);
         self.promised.set(self.promised.get() + usize::from(yes));
         yes
     }
@@ -767,7 +775,8 @@ impl graph::NodeOverride for Recording {
 /// outputs at wide footprints) asks for those nodes alone: the same values bit for bit, the same
 /// lookups in the same order and the same counts as when the override does not say beforehand
 /// what it answers and the whole graph is visited. On random graphs, random sets of outputs and
-/// of answered nodes (sometimes all the outputs' nodes, sometimes not all), at random footprints.
+/// of answered nodes (sometimes all the outputs' nodes, sometimes not all; some only at wide
+/// footprints), at random footprints.
 #[test]
 fn outputs_answered_by_an_override_read_the_same_as_the_whole_graph() {
     let mut rng = Rng(0xA25_BE7);
@@ -824,7 +833,7 @@ fn outputs_answered_by_an_override_read_the_same_as_the_whole_graph() {
         assert_eq!(*fast.asked.borrow(), *whole.asked.borrow(), "graph {index}: lookups\n{}", rg.listing);
         assert_eq!(sa.lookups(), sb.lookups(), "graph {index}");
         assert_eq!(sa.evaluations(), sb.evaluations(), "graph {index}");
-        all_answered += usize::from(output_nodes.iter().all(|n| answered.contains(n)) && fast.promised.get() > 0);
+        all_answered += usize::from(fast.promised.get() > 0);
     }
     assert!(all_answered > 100 && compared > 1000, "{all_answered} graphs answered whole, {compared} comparisons");
 }

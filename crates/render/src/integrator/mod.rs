@@ -102,9 +102,9 @@ pub struct RenderCounts {
     pub nonfinite_samples: u64,
     /// Samples with a channel beyond [`crate::film::SAMPLE_LIMIT`], clamped to it.
     pub clamped_samples: u64,
-    /// Texture evaluations at a pixel centre's footprint, one per pixel and surface (first hits,
-    /// and hits seen through perfect mirrors and smooth glass; see
-    /// `TextureEvaluator::begin_pixel` in `crate::shading`).
+    /// Texture evaluations at a pixel centre's footprint, one per pixel and key: the surface,
+    /// and the way through perfect mirrors and smooth glass to it (more where a pixel meets more
+    /// keys than it keeps at once; see `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub pixel_texture_evaluations: u64,
     /// Hits that read their pixel's shared textures.
     pub pixel_texture_reads: u64,
@@ -114,8 +114,9 @@ pub struct RenderCounts {
     pub pixel_texture_misses: u64,
     /// Path vertices whose footprint the estimator computed.
     pub footprints: u64,
-    /// Hits without textures whose footprint no later hit of the path read, so never computed
-    /// (see `FootprintCarrier` in `crate::integrator::path`).
+    /// Hits whose footprint nothing read, there (no textures, textures from the pixel's shared
+    /// evaluation, or the path's last hit) or at a later hit of the path, so never computed (see
+    /// `FootprintCarrier` in `crate::integrator::path`).
     pub footprints_skipped: u64,
 }
 
@@ -200,8 +201,9 @@ pub struct RenderSettings {
     /// default filter scale; see `TextureEvaluator::begin_pixel` in `crate::shading`).
     pub per_sample_textures: bool,
     /// Compute the footprint of every hit as the path reaches it. By default a hit whose
-    /// material has no textures is computed only once a later hit's textures read their
-    /// footprint (never, if none does); the images are the same either way.
+    /// footprint nothing reads there (no textures, or textures read from the pixel's shared
+    /// evaluation) is computed only once a later hit's textures read their footprint (never,
+    /// if none does); the images are the same either way.
     pub eager_footprints: bool,
 }
 

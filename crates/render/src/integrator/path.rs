@@ -133,10 +133,10 @@ pub fn shares_pixel_textures(settings: &RenderSettings) -> bool {
 /// What a material's textures are filtered over at a hit: the hit as a footprint vertex (none
 /// when footprints are not tracked: textures are then read at a point, the default), the
 /// path's tangent-plane covariance there, and where the filter is centred relative to the hit.
-/// `pixel`: the key of the pixel's shared textures this hit reads
-/// ([`TextureEvaluator::begin_pixel`]): the camera ray's hit with its footprint centred all the
-/// way on the pixel centre, or a hit the path reached from there through perfect mirrors and
-/// smooth dielectrics without textures.
+/// `pixel`: the hit's key among the pixel's shared textures ([`TextureEvaluator::begin_pixel`]),
+/// where it has one: the camera ray's hit, or a hit the path reached from there through perfect
+/// mirrors and smooth dielectrics without textures (whether or not the hit reads the entry;
+/// `shared` is the entry it reads).
 #[derive(Clone, Copy, Debug, Default)]
 struct TextureFootprint {
     vertex: Option<Vertex>,
@@ -178,7 +178,8 @@ struct FootprintCarrier<'c> {
     /// Whether footprints are tracked at all: they cost a few hundred nanoseconds per bounce, so
     /// only when a material's textures or the observer will read them.
     track: bool,
-    /// Whether hits without textures may be deferred: not when the observer reads every
+    /// Whether hits whose footprint nothing reads there (no textures, or the pixel's shared
+    /// ones) may be deferred: not when the observer reads every
     /// footprint, nor where shadow rays cross partly transparent surfaces (their footprints
     /// start from the shading vertex's state), nor when the settings ask for every footprint
     /// ([`RenderSettings::eager_footprints`]).
@@ -380,12 +381,12 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
     }
 
     /// The entry of the pixel's shared textures for `key` (made on the pixel's first sample to
-    /// reach it) that a sample whose hit on the key's last surface has texture coordinates `uv`
-    /// reads, if it may read one: where `uv` lies within [`SHARE_DISTANCE`] of the entry's
-    /// centre. Decided from `uv` alone, before the sample's own footprint there, which a sample
-    /// that reads the entry then does not need (it is computed only if a later hit reads
+    /// reach it) that a sample whose hit on the key's last surface is `si` reads, if it may read
+    /// one (`TextureEvaluator::first_hit_accepts`: near the entry's centre in texture
+    /// coordinates and in space). Decided before the sample's own footprint there, which a
+    /// sample that reads the entry then does not need (it is computed only if a later hit reads
     /// textures).
-    fn shared_entry(&mut self, material: &'a Material, key: &PixelKey, uv: Vec2) -> Option<usize> {
+    fn shared_entry(&mut self, material: &'a Material, key: &PixelKey, si: &SurfaceInteraction) -> Option<usize> {
         let k = match self.textures.first_hit(key) {
             Some(k) => k,
             None => {
@@ -395,7 +396,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
                 k
             }
         };
-        let read = self.textures.first_hit_accepts(k, uv);
+        let read = self.textures.first_hit_accepts(k, si.uv, si.p);
         if read {
             self.counts.pixel_texture_reads += 1;
         } else {
@@ -410,7 +411,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
     /// have no textures and perfectly specular BSDFs, so the way is the whole choice). Each
     /// surface is met wherever the ray meets it, in front of the others or not, as a first hit's
     /// is. `None` when the ray misses one or cannot scatter the key's way there.
-    fn pixel_centre_footprint(&self, key: &PixelKey) -> Option<graph::Footprint> {
+    fn pixel_centre_footprint(&self, key: &PixelKey) -> Option<(graph::Footprint, f64)> {
         let scene = self.scene;
         let (x, y) = self.textures.pixel()?;
         let cam = scene.camera.generate_ray(Vec2::new(x as f32 + 0.5, y as f32 + 0.5));
@@ -444,7 +445,10 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
             (si, v) = (next, nv);
         }
         let fp = self.graph_footprint(&si, uv_jacobian, var);
-        (fp.uv.is_finite() && fp.cov.is_finite()).then_some(fp)
+        // The tangent-plane covariance's larger eigenvalue: the footprint's spread in space.
+        let spread = 0.5 * (var.x_axis.x + var.y_axis.y)
+            + (0.25 * (var.x_axis.x - var.y_axis.y).powi(2) + var.x_axis.y * var.y_axis.x).max(0.0).sqrt();
+        (fp.uv.is_finite() && fp.cov.is_finite() && spread.is_finite()).then_some((fp, spread))
     }
 
     /// The footprint graphs are evaluated over at hit `si` (whose vertex has uv Jacobian
@@ -726,13 +730,16 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         } else {
             specular.and_then(|(key, refracted)| key.then(refracted, hit.shape))
         };
-        let textured = !material.graphs.is_empty();
+        // Textures are read here for the opacity, or for the BSDF unless the path ends here.
+        let reads_textures = !material.graphs.is_empty()
+            && !settings.free_textures
+            && (material.bsdf.is_masked() || depth + 1 < path.max_depth);
         let shared = match &key {
-            Some(key) if textured && !settings.free_textures => tracer.shared_entry(material, key, si.uv),
+            Some(key) if reads_textures => tracer.shared_entry(material, key, &si),
             _ => None,
         };
         // The footprint here; the path keeps it only if it scatters here.
-        let mut here = footprints.arrive(&settings, &si, ray.d, textured && shared.is_none());
+        let mut here = footprints.arrive(&settings, &si, ray.d, reads_textures && shared.is_none());
         (here.pixel, here.shared) = (key, shared);
         if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {
             result += l;

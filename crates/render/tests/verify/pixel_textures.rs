@@ -180,3 +180,42 @@ fn textures_behind_mirrors_and_glass_are_shared_by_the_pixel() {
     assert!(shared.image.pixels.iter().all(|p| p.is_finite()));
     assert_order_free(&scene, spp, 5);
 }
+
+/// One mesh of two quads with the same texture coordinates, one half a unit behind the other
+/// and reaching past its edge: along that edge a pixel's samples hit the back quad where the
+/// pixel centre's ray hits the front one, at nearly the texture coordinates of the centre's hit
+/// but half a unit away. They evaluate their own textures: sharing is decided in space too, not
+/// by texture coordinates alone.
+#[test]
+fn samples_far_from_the_pixel_centre_in_space_evaluate_their_own() {
+    let dir = std::env::temp_dir().join(format!("tessera-stacked-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    // uv = ((x + 1) / 2, (y + 1) / 2) on both quads: front x ∈ [−1, 0] at z = 0, back x ∈ [−1, 1]
+    // at z = −0.5.
+    let obj = "v -1 -1 0\nv 0 -1 0\nv 0 1 0\nv -1 1 0\nvt 0 0\nvt 0.5 0\nvt 0.5 1\nvt 0 1\n\
+               v -1 -1 -0.5\nv 1 -1 -0.5\nv 1 1 -0.5\nv -1 1 -0.5\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\n\
+               f 1/1 2/2 3/3\nf 1/1 3/3 4/4\nf 5/5 6/6 7/7\nf 5/5 7/7 8/8\n";
+    std::fs::write(dir.join("stacked.obj"), obj).unwrap();
+    let data = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data");
+    let xml = format!(
+        r#"<scene version="3.0.0">
+        <integrator type="path"><integer name="max_depth" value="2"/></integrator>
+        <sensor type="perspective"><float name="fov" value="30"/>
+            <transform name="to_world"><lookat origin="0, 0, 3" target="0, 0, 0" up="0, 1, 0"/></transform>
+            <film type="hdrfilm"><integer name="width" value="32"/><integer name="height" value="8"/><rfilter type="gaussian"/></film>
+        </sensor>
+        <shape type="obj"><string name="filename" value="{}"/><bsdf type="diffuse">{CHECKER}</bsdf></shape>
+        <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+    </scene>"#,
+        dir.join("stacked.obj").display()
+    );
+    let scene = render::loader::load_str(&xml, Path::new("stacked.xml"), &data, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let out = run(&scene, 16, 3, false);
+    let c = &out.counts;
+    eprintln!("{} reads, {} misses of {} samples", c.pixel_texture_reads, c.pixel_texture_misses, c.samples);
+    // The edge runs down one column of 8 pixels: of each such pixel's samples, those on the
+    // other side of the edge from its centre's (about half) hit the other quad.
+    assert!(c.pixel_texture_misses >= 8 * 4, "{} misses", c.pixel_texture_misses);
+    assert!(c.pixel_texture_misses <= 8 * 3 * 16, "{} misses", c.pixel_texture_misses);
+    std::fs::remove_dir_all(&dir).ok();
+}
