@@ -237,6 +237,7 @@ impl<'c> FootprintCarrier<'c> {
 
     /// Advances the estimator through the deferred vertices, oldest first, exactly as
     /// [`Self::arrive`] would have on reaching each.
+    #[inline(never)]
     fn catch_up(&mut self) {
         for k in 0..self.n_deferred {
             let Some(e) = self.deferred[k].take() else { continue };
@@ -278,7 +279,9 @@ impl<'c> FootprintCarrier<'c> {
             return TextureFootprint { vertex: Some(v), ..TextureFootprint::default() };
         }
         self.arrived = None;
-        self.catch_up();
+        if self.n_deferred > 0 {
+            self.catch_up();
+        }
         self.computed += 1;
         let next = 1 - self.cur;
         let (var, uv_jacobian, shift) = match &self.last {
@@ -411,6 +414,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
     /// have no textures and perfectly specular BSDFs, so the way is the whole choice). Each
     /// surface is met wherever the ray meets it, in front of the others or not, as a first hit's
     /// is. `None` when the ray misses one or cannot scatter the key's way there.
+    #[inline(never)]
     fn pixel_centre_footprint(&self, key: &PixelKey) -> Option<(graph::Footprint, f64)> {
         let scene = self.scene;
         let (x, y) = self.textures.pixel()?;
@@ -703,7 +707,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
     // dielectric without textures (and pixels share textures): the key of those surfaces and
     // whether the path refracted at the last. The next textured hit reads the pixel's textures
     // for that key.
-    let shares = shares_pixel_textures(&settings);
+    let shares = footprints.track && shares_pixel_textures(&settings);
     let mut specular: Option<(PixelKey, bool)> = None;
     loop {
         tracer.textures.depth = depth;
