@@ -174,10 +174,12 @@ const DEFERRED: usize = 4;
 /// when a later hit's textures need their footprint, and never if none does. Most camera
 /// paths' footprints were computed for nothing: a first hit that reads its pixel's textures,
 /// then a plain wall and the sky.
-struct FootprintCarrier<'c> {
-    /// Whether footprints are tracked at all: they cost a few hundred nanoseconds per bounce, so
-    /// only when a material's textures or the observer will read them.
-    track: bool,
+///
+/// `TRACK`: whether footprints are tracked at all (they cost a few hundred nanoseconds per
+/// bounce, so only when a material's textures or the observer will read them; see
+/// [`footprints_tracked`]). A constant, so that a render without textures compiles its path
+/// loop without any of this.
+struct FootprintCarrier<'c, const TRACK: bool> {
     /// Whether hits whose footprint nothing reads there (no textures, or the pixel's shared
     /// ones) may be deferred: not when the observer reads every
     /// footprint, nor where shadow rays cross partly transparent surfaces (their footprints
@@ -208,12 +210,16 @@ struct FootprintCarrier<'c> {
     spp: u32,
 }
 
-impl<'c> FootprintCarrier<'c> {
+/// Whether camera paths carry footprints: an estimator is chosen, and a material's textures (not
+/// replaced by their means) or the observer read them.
+fn footprints_tracked(scene: &Scene, settings: &RenderSettings, observer_wants_footprints: bool) -> bool {
+    settings.footprint != FootprintMode::None
+        && ((scene.footprints_needed && !settings.free_textures) || observer_wants_footprints)
+}
+
+impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
     fn new(scene: &'c Scene, settings: &RenderSettings, cam: &'c CameraRay, observer_wants_footprints: bool) -> Self {
-        let track = settings.footprint != FootprintMode::None
-            && ((scene.footprints_needed && !settings.free_textures) || observer_wants_footprints);
         FootprintCarrier {
-            track,
             defer: !observer_wants_footprints && !scene.masked && !settings.eager_footprints,
             computed: 0,
             states: [PathFootprint::None; 2],
@@ -260,6 +266,9 @@ impl<'c> FootprintCarrier<'c> {
 
     /// Adds the path's footprints, computed and skipped, to `counts` (when it ends).
     fn count_into(&self, counts: &mut RenderCounts) {
+        if !TRACK {
+            return;
+        }
         counts.footprints += u64::from(self.computed);
         counts.footprints_skipped += (self.n_deferred + usize::from(self.arrived.is_some())) as u64;
     }
@@ -270,7 +279,7 @@ impl<'c> FootprintCarrier<'c> {
     /// `read` is false (the hit's material has no textures, or reads its pixel's) the footprint
     /// may be deferred: the answer then has the vertex alone.
     fn arrive(&mut self, settings: &RenderSettings, si: &SurfaceInteraction, d: Vec3, read: bool) -> TextureFootprint {
-        if !self.track {
+        if !TRACK {
             return TextureFootprint::default();
         }
         let v = si.footprint_vertex();
@@ -308,14 +317,14 @@ impl<'c> FootprintCarrier<'c> {
     /// The path scatters at the hit it arrived at last: it keeps the footprint there (a
     /// deferred hit joins the deferred vertices when its BSDF sample is known).
     fn scatter_at(&mut self) {
-        if self.track && self.arrived.is_none() {
+        if TRACK && self.arrived.is_none() {
             self.cur = 1 - self.cur;
         }
     }
 
     /// The path left the hit with footprint `here` by BSDF sample `bs`.
     fn sampled(&mut self, here: &TextureFootprint, bs: BsdfSample) {
-        if !self.track {
+        if !TRACK {
             return;
         }
         let Some(v) = here.vertex else { return };
@@ -690,6 +699,23 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
     textures: &mut TextureEvaluator<S>,
     obs: &mut O,
 ) -> Spectrum {
+    if footprints_tracked(scene, &settings, O::WANTS_FOOTPRINTS) {
+        radiance_with::<S, O, true>(scene, settings, cam, rng, counts, textures, obs)
+    } else {
+        radiance_with::<S, O, false>(scene, settings, cam, rng, counts, textures, obs)
+    }
+}
+
+/// [`radiance`] with footprints tracked (`TRACK`) or not.
+fn radiance_with<S: GraphSource, O: PathObserver, const TRACK: bool>(
+    scene: &Scene,
+    settings: RenderSettings,
+    cam: &CameraRay,
+    rng: &mut Rng,
+    counts: &mut RenderCounts,
+    textures: &mut TextureEvaluator<S>,
+    obs: &mut O,
+) -> Spectrum {
     let path = scene.integrator;
     let n_emitters = scene.emitters.len();
     let select_pdf = if n_emitters > 0 { 1.0 / n_emitters as f32 } else { 0.0 };
@@ -700,14 +726,14 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
     let mut eta = 1.0f32;
     let mut depth = 0u32;
     let mut last = LastScatter { p: ray.o, pdf: 0.0, delta: true };
-    let mut footprints = FootprintCarrier::new(scene, &settings, cam, O::WANTS_FOOTPRINTS);
+    let mut footprints = FootprintCarrier::<TRACK>::new(scene, &settings, cam, O::WANTS_FOOTPRINTS);
     // Surfaces passed straight through since the last scattering vertex.
     let mut passes = 0u32;
     // While every surface the path scattered at so far was a perfect mirror or smooth
     // dielectric without textures (and pixels share textures): the key of those surfaces and
     // whether the path refracted at the last. The next textured hit reads the pixel's textures
     // for that key.
-    let shares = footprints.track && shares_pixel_textures(&settings);
+    let shares = TRACK && shares_pixel_textures(&settings);
     let mut specular: Option<(PixelKey, bool)> = None;
     loop {
         tracer.textures.depth = depth;
@@ -725,7 +751,7 @@ pub fn radiance<S: GraphSource, O: PathObserver>(
         let shape = &scene.shapes[hit.shape as usize];
         let material = &scene.materials[shape.material as usize];
         // The surface's parametrisation only where a texture, a footprint or the observer reads it.
-        let full = footprints.track || O::WANTS_FOOTPRINTS || material.reads_uv();
+        let full = TRACK || O::WANTS_FOOTPRINTS || material.reads_uv();
         let si = interaction_with(&scene.shapes, &ray, &hit, full);
         // The pixel's shared textures this hit reads, if any: decided before its footprint, which
         // it then needs only if a later hit reads textures.
