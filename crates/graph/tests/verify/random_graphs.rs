@@ -755,7 +755,7 @@ impl Recording {
     /// Whether `node` is answered at `fp`: odd nodes only at footprints of some width (as a
     /// cache answers only from its plan's coarsest levels on).
     fn answering(&self, node: graph::NodeId, fp: &Footprint) -> bool {
-        self.answered.contains(&node) && (node.0 % 2 == 0 || fp.cov.determinant() > 1e-8)
+        self.answered.contains(&node) && (node.0.is_multiple_of(2) || fp.cov.determinant() > 1e-8)
     }
 }
 
@@ -799,10 +799,10 @@ fn outputs_answered_by_an_override_read_the_same_as_the_whole_graph() {
             .collect();
         // Every output's node answered in most draws; one of them left out in the others.
         let mut answered = output_nodes.clone();
-        if rng.next_u64() % 3 == 0 && !answered.is_empty() {
+        if rng.next_u64().is_multiple_of(3) && !answered.is_empty() {
             answered.remove((rng.next_u64() % answered.len() as u64) as usize);
         }
-        let others: Vec<graph::NodeId> = g.node_ids().filter(|_| rng.next_u64() % 4 == 0).collect();
+        let others: Vec<graph::NodeId> = g.node_ids().filter(|_| rng.next_u64().is_multiple_of(4)).collect();
         answered.extend(others);
         let make = |honest| Recording {
             answered: answered.clone(),
