@@ -245,22 +245,25 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
     /// [`Self::arrive`] would have on reaching each.
     #[inline(never)]
     fn catch_up(&mut self) {
-        for k in 0..self.n_deferred {
-            let Some(e) = self.deferred[k].take() else { continue };
-            let state = &mut self.states[self.cur];
-            match &self.last {
+        let n = self.n_deferred;
+        // Read in place: a deferred vertex is a quarter of a kilobyte, and moving each out of
+        // the queue before advancing through it doubled the copies.
+        let FootprintCarrier { deferred, states, cur, last, camera, cam, mode, spp, .. } = self;
+        let state = &mut states[*cur];
+        for e in deferred[..n].iter().flatten() {
+            match last {
                 None => {
                     let local = e.vertex.local();
                     let at = (&local, local.geometric_normal(e.vertex.n));
-                    *state = PathFootprint::start(self.mode, self.camera, self.cam, &e.vertex, at, self.spp).0;
+                    *state = PathFootprint::start(*mode, camera, cam, &e.vertex, at, *spp).0;
                 }
                 Some((pv, bs)) => {
                     state.advance(pv, bs, e.d, &e.vertex);
                 }
             }
-            self.last = Some((e.vertex, e.bs));
+            *last = Some((e.vertex, e.bs));
         }
-        self.computed += self.n_deferred as u32;
+        self.computed += n as u32;
         self.n_deferred = 0;
     }
 
