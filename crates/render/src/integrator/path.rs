@@ -210,6 +210,22 @@ struct FootprintCarrier<'c, const TRACK: bool> {
     spp: u32,
 }
 
+/// The estimator started at a camera ray's first hit `v` (the camera `cam` of `camera`): its
+/// state, `var(Δx₁)`, and `v`'s local geometry with its geometric normal (which the recentring
+/// reads too). The one start of an eager first hit, a deferred one and a pixel centre's ray.
+fn start_at(
+    mode: FootprintMode,
+    camera: &Camera,
+    cam: &CameraRay,
+    v: &Vertex,
+    spp: u32,
+) -> (PathFootprint, DMat2, LocalGeometry, DVec3) {
+    let local = v.local();
+    let g = local.geometric_normal(v.n);
+    let (state, var) = PathFootprint::start(mode, camera, cam, v, (&local, g), spp);
+    (state, var, local, g)
+}
+
 /// Whether camera paths carry footprints: an estimator is chosen, and a material's textures (not
 /// replaced by their means) or the observer read them.
 fn footprints_tracked(scene: &Scene, settings: &RenderSettings, observer_wants_footprints: bool) -> bool {
@@ -252,11 +268,7 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
         let state = &mut states[*cur];
         for e in deferred[..n].iter().flatten() {
             match last {
-                None => {
-                    let local = e.vertex.local();
-                    let at = (&local, local.geometric_normal(e.vertex.n));
-                    *state = PathFootprint::start(*mode, camera, cam, &e.vertex, at, *spp).0;
-                }
+                None => *state = start_at(*mode, camera, cam, &e.vertex, *spp).0,
                 Some((pv, bs)) => {
                     state.advance(pv, bs, e.d, &e.vertex);
                 }
@@ -300,12 +312,9 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
             None => {
                 // The first hit's local geometry serves the tracker's start, the recentring and
                 // the texture footprint: computed once (it was four times).
-                let local = v.local();
-                let at = (&local, local.geometric_normal(v.n));
-                let (state, var) =
-                    PathFootprint::start(settings.footprint, self.camera, self.cam, &v, at, settings.spp);
+                let (state, var, local, g) = start_at(self.mode, self.camera, self.cam, &v, self.spp);
                 self.states[next] = state;
-                let shift = first_vertex_shift(settings, self.cam, &v, at);
+                let shift = first_vertex_shift(settings, self.cam, &v, (&local, g));
                 (var, local.uv_jacobian, shift)
             }
             Some((pv, bs)) => {
@@ -436,10 +445,8 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         let hit = scene.accel.intersect_shape(&scene.shapes, &ray, shapes[0])?;
         let mut si = interaction(&scene.shapes, &ray, &hit);
         let mut v = si.footprint_vertex();
-        let local = v.local();
-        let at = (&local, local.geometric_normal(v.n));
-        let (mut state, mut var) =
-            PathFootprint::start(self.settings.footprint, &scene.camera, &cam, &v, at, self.settings.spp);
+        let (mut state, mut var, local, _) =
+            start_at(self.settings.footprint, &scene.camera, &cam, &v, self.settings.spp);
         let mut uv_jacobian = local.uv_jacobian;
         for (k, &shape) in shapes.iter().enumerate().skip(1) {
             let material = &scene.materials[scene.shapes[shapes[k - 1] as usize].material as usize];
@@ -462,8 +469,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
         }
         let fp = self.graph_footprint(&si, uv_jacobian, var);
         // The tangent-plane covariance's larger eigenvalue: the footprint's spread in space.
-        let spread = 0.5 * (var.x_axis.x + var.y_axis.y)
-            + (0.25 * (var.x_axis.x - var.y_axis.y).powi(2) + var.x_axis.y * var.y_axis.x).max(0.0).sqrt();
+        let spread = footprint::mat::sym_eigen(var).0;
         (fp.uv.is_finite() && fp.cov.is_finite() && spread.is_finite()).then_some((fp, spread))
     }
 
@@ -853,9 +859,8 @@ fn radiance_with<S: GraphSource, O: PathObserver, const TRACK: bool>(
         ray = spawn_ray(&si, si.sh.to_world(bs.wo));
         depth += 1;
         specular = match here.pixel {
-            Some(key)
-                if shares && bs.kind == LobeKind::Specular && material.graphs.is_empty() && !bsdf.has_smooth() =>
-            {
+            // A hit has a key only where pixels share textures.
+            Some(key) if bs.kind == LobeKind::Specular && material.graphs.is_empty() && !bsdf.has_smooth() => {
                 Some((key, bs.transmitted))
             }
             _ => None,
