@@ -870,6 +870,23 @@ impl GraphOverride<'_, '_> {
     }
 }
 
+impl GraphOverride<'_, '_> {
+    /// Whether the tiles answer `node` at `fp`, and if so its texture and the level to read
+    /// (`None` for a baked texture, read at its own density): not where the footprint is finer
+    /// than the plan's threshold for the node (or level 0), which is evaluated directly.
+    #[inline]
+    fn answered(&self, node: NodeId, fp: &Footprint) -> Option<(cache::TextureId, Option<f32>)> {
+        let nc = self.access.cache;
+        let (g, i) = (self.graph as usize, node.0 as usize);
+        let tex = nc.textures[g][i]?;
+        if nc.baked {
+            return Some((tex, None));
+        }
+        let level = self.level(fp.cov);
+        (level >= f32::from(nc.min_level[g][i])).then_some((tex, Some(level)))
+    }
+}
+
 impl NodeOverride for GraphOverride<'_, '_> {
     fn never_answers(&self) -> bool {
         self.access.cache.uncached[self.graph as usize]
@@ -877,25 +894,12 @@ impl NodeOverride for GraphOverride<'_, '_> {
 
     #[inline]
     fn answers(&self, node: NodeId, fp: &Footprint) -> bool {
-        let nc = self.access.cache;
-        let (g, i) = (self.graph as usize, node.0 as usize);
-        nc.textures[g][i].is_some() && (nc.baked || self.level(fp.cov) >= f32::from(nc.min_level[g][i]))
+        self.answered(node, fp).is_some()
     }
 
     fn lookup(&self, node: NodeId, fp: &Footprint) -> Option<Filtered> {
         let nc = self.access.cache;
-        let tex = nc.textures[self.graph as usize][node.0 as usize]?;
-        // Node textures are laid out at LEVEL0_TEXELS_PER_UV; baked ones at their own density.
-        let level = if nc.baked {
-            None
-        } else {
-            let min = nc.min_level[self.graph as usize][node.0 as usize];
-            let level = self.level(fp.cov);
-            if level < f32::from(min) {
-                return None; // finer than level 0 or than the plan's threshold: evaluate directly
-            }
-            Some(level)
-        };
+        let (tex, level) = self.answered(node, fp)?;
         let fill = |req: cache::TexelRequest| self.access.fill_texel(self.graph, node, &req);
         let v = match level {
             Some(level) => self.access.reader.lookup_with_level(tex, fp.uv, fp.cov, level, nc.filter, &fill),

@@ -145,7 +145,7 @@ pub struct TextureEvaluator<S> {
 const FIRST_HITS_KEPT: usize = 8;
 
 /// Most surfaces on a [`PixelKey`]: the textured hit and the perfectly specular ones before it.
-pub(crate) const PIXEL_CHAIN: usize = 4;
+const PIXEL_CHAIN: usize = 4;
 
 /// Which of a pixel's shared texture entries a camera sample reads: the surfaces its path met
 /// from the camera on, every one but the last a perfect mirror or smooth dielectric without
@@ -305,7 +305,7 @@ impl<S: GraphSource> TextureEvaluator<S> {
         material: &Material,
         key: PixelKey,
         centre: Option<(Footprint, f64)>,
-    ) -> Option<(usize, bool)> {
+    ) -> (usize, bool) {
         let hits = &mut self.first_hits;
         let k = if hits.len < FIRST_HITS_KEPT {
             hits.len += 1;
@@ -336,7 +336,7 @@ impl<S: GraphSource> TextureEvaluator<S> {
         if kept.is_some() {
             e.outputs[..n].copy_from_slice(&self.outputs[..n]);
         }
-        Some((k, evaluated))
+        (k, evaluated)
     }
 
     /// Whether a sample whose hit has texture coordinates `uv` and position `p` reads entry

@@ -415,7 +415,7 @@ impl<'a, S: GraphSource> Tracer<'a, '_, S> {
             Some(k) => k,
             None => {
                 let centre = self.pixel_centre_footprint(key);
-                let (k, evaluated) = self.textures.keep_first_hit(&self.scene.graphs, material, *key, centre)?;
+                let (k, evaluated) = self.textures.keep_first_hit(&self.scene.graphs, material, *key, centre);
                 self.counts.pixel_texture_evaluations += u64::from(evaluated);
                 k
             }
