@@ -336,6 +336,22 @@ fn gauss_legendre_short() -> &'static [(f64, f64); GL_SHORT] {
     R.get_or_init(legendre_rule)
 }
 
+/// The rule [`union_coverage`] uses beyond the footprint's shoulders (±[`SHOULDER`]σ).
+const GL_TAIL: usize = 6;
+
+/// The 6-point Gauss–Legendre rule on [−1, 1].
+fn gauss_legendre_tail() -> &'static [(f64, f64); GL_TAIL] {
+    static R: OnceLock<[(f64, f64); GL_TAIL]> = OnceLock::new();
+    R.get_or_init(legendre_rule)
+}
+
+/// Where [`union_coverage`] cuts one or two spans (in σ from the footprint's centre): between
+/// ±2σ the Gaussian weight holds 95 % of the mass and its curvature; beyond, a smooth tail.
+pub(super) const SHOULDER: f64 = 2.0;
+
+/// `Φ(−SHOULDER)` and `Φ(SHOULDER)` (a test checks them against [`cdf`]).
+pub(super) const PHI_SHOULDER: [f64; 2] = [0.022_750_131_948_179_22, 0.977_249_868_051_820_8];
+
 /// The `N`-point Gauss–Legendre nodes and weights, by Newton's method on the Legendre
 /// polynomial.
 fn legendre_rule<const N: usize>() -> [(f64, f64); N] {
@@ -457,9 +473,14 @@ const MAX_UNION: usize = 12;
 /// Coverage of the union of (possibly overlapping) pieces under `N(m, diag(s²))`, as
 /// [`coverage`] but with the chords of all pieces at each height merged into disjoint
 /// intervals first: a union with no inclusion–exclusion terms to find. The narrower axis is
-/// integrated piecewise between the pieces' extents (Gauss–Legendre on each span: 20 points
-/// for up to two spans, 8 for more), only the pieces whose box meets the footprint's taken,
-/// so that each span sees chords that begin and end only at its ends.
+/// integrated piecewise between the pieces' extents (Gauss–Legendre on each span), only the
+/// pieces whose box meets the footprint's taken, so that each span sees chords that begin and
+/// end only at its ends. Up to two spans are cut again at the footprint's shoulders (±2σ):
+/// 8 points on the parts within, 6 on the tails (a span as long as the footprint's ±6σ, which
+/// took one 20-point rule, takes 20 again; one ending at a leaf's edge near the centre, 14
+/// instead of 20). Over a third fewer chord evaluations than 20 points on each, for the same
+/// mean error against brute force on clovers and overlapping circles (2.9e-6 against 2.8e-6,
+/// 1 400 cells around 400 random footprints). More spans take 8 points each.
 pub(super) fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     union_coverage_with(pieces, m, s, true)
 }
@@ -553,23 +574,60 @@ pub(super) fn union_coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcut
     let cuts = &mut cuts[..n];
     cuts.sort_unstable_by(f64::total_cmp);
     let spans = cuts.windows(2).filter(|w| w[1] > w[0]).count();
-    // One span takes the long rule; several share the work, the short rule on each.
-    let rule: &[(f64, f64)] = if spans <= 2 { gauss_legendre() } else { gauss_legendre_short() };
     let mut p = 0.0;
-    for w in cuts.windows(2) {
-        let (a, b) = (w[0], w[1]);
-        if b - a <= 0.0 {
-            continue;
-        }
+    // With one or two spans, each part's sums are scaled by the Gaussian's exact mass over the
+    // part (`exact`) against the rule's: exact where the chords' mass is constant over the part
+    // (a footprint inside the union, cut only by a cell's edge), where the shorter rules alone
+    // left 1e-7 of the weight's own integral (the 20-point rule under 1e-9). The masses come
+    // from Φ at the cuts, shared by the spans either side, and at the shoulders (constants).
+    let mut span = |a: f64, b: f64, rule: &[(f64, f64)], exact: Option<f64>| {
         let (half, mid) = ((b - a) * 0.5, (b + a) * 0.5);
+        let (mut sp, mut so, mut sz, mut w) = (0.0, 0.0, 0.0, 0.0);
         for &(x, wt) in rule {
             let t = mid + half * x;
             let z = (t - mk) / sk;
             let wt = wt * half * pdf(z) / sk;
             let (q, dq) = at(t);
-            p += wt * q;
-            g[o] += wt * dq;
-            g[k] += wt * q * z / sk;
+            sp += wt * q;
+            so += wt * dq;
+            sz += wt * q * z / sk;
+            w += wt;
+        }
+        let f = match exact {
+            Some(e) if w > 0.0 => e / w,
+            _ => 1.0,
+        };
+        p += sp * f;
+        g[o] += so * f;
+        g[k] += sz;
+    };
+    if spans > 2 {
+        for w in cuts.windows(2).filter(|w| w[1] > w[0]) {
+            span(w[0], w[1], gauss_legendre_short(), None);
+        }
+    } else {
+        let shoulders = [(mk - SHOULDER * sk, PHI_SHOULDER[0]), (mk + SHOULDER * sk, PHI_SHOULDER[1])];
+        let mut phi_lo = None;
+        for w in cuts.windows(2) {
+            let (a, b) = (w[0], w[1]);
+            if b - a <= 0.0 {
+                continue;
+            }
+            // Φ at the span's ends: the lower one is the last span's upper one where they meet.
+            let pa = match phi_lo {
+                Some((x, v)) if x == a => v,
+                _ => cdf((a - mk) / sk),
+            };
+            let pb = cdf((b - mk) / sk);
+            phi_lo = Some((b, pb));
+            // The span cut at the shoulders inside it; each part by its rule.
+            let mut lo = (a, pa);
+            for (cut, pc) in shoulders.into_iter().filter(|&(c, _)| c > a && c < b).chain([(b, pb)]) {
+                let central = lo.0 >= shoulders[0].0 && cut <= shoulders[1].0;
+                let rule: &[(f64, f64)] = if central { gauss_legendre_short() } else { gauss_legendre_tail() };
+                span(lo.0, cut, rule, Some(pc - lo.1));
+                lo = (cut, pc);
+            }
         }
     }
     (p.clamp(0.0, 1.0), DVec2::new(g[0], g[1]))

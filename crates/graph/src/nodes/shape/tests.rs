@@ -278,3 +278,11 @@ fn small_shapes_match_quadrature() {
     }
     assert!(used > 600, "used {used} times");
 }
+
+/// The union quadrature's constants at its shoulders are Φ there.
+#[test]
+fn shoulder_constants_are_the_normal_cdf() {
+    use coverage::{PHI_SHOULDER, SHOULDER};
+    assert!((PHI_SHOULDER[0] - crate::gaussian::cdf(-SHOULDER)).abs() < 1e-16);
+    assert!((PHI_SHOULDER[1] - crate::gaussian::cdf(SHOULDER)).abs() < 2e-16);
+}
