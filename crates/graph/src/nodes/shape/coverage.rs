@@ -1,6 +1,6 @@
 //! Convex pieces and their Gaussian coverage.
 
-use crate::gaussian::{cdf, pdf};
+use crate::gaussian::{cdf, pdf, tails};
 use glam::DVec2;
 use std::sync::OnceLock;
 
@@ -478,9 +478,10 @@ const MAX_UNION: usize = 12;
 /// end only at its ends. Up to two spans are cut again at the footprint's shoulders (±2σ):
 /// 8 points on the parts within, 6 on the tails (a span as long as the footprint's ±6σ, which
 /// took one 20-point rule, takes 20 again; one ending at a leaf's edge near the centre, 14
-/// instead of 20). Over a third fewer chord evaluations than 20 points on each, for the same
-/// mean error against brute force on clovers and overlapping circles (2.9e-6 against 2.8e-6,
-/// 1 400 cells around 400 random footprints). More spans take 8 points each.
+/// instead of 20). A third fewer chord evaluations than 20 points on each, for the same mean
+/// error against brute force on clovers and overlapping circles (2.9e-6 against 2.8e-6, 1 400
+/// cells around 400 random footprints), once each part is rescaled to the Gaussian's exact mass
+/// over it. More spans take 8 points each.
 pub(super) fn union_coverage(pieces: &[Piece], m: DVec2, s: DVec2) -> (f64, DVec2) {
     union_coverage_with(pieces, m, s, true)
 }
@@ -606,8 +607,19 @@ pub(super) fn union_coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcut
             span(w[0], w[1], gauss_legendre_short(), None);
         }
     } else {
-        let shoulders = [(mk - SHOULDER * sk, PHI_SHOULDER[0]), (mk + SHOULDER * sk, PHI_SHOULDER[1])];
-        let mut phi_lo = None;
+        // (Φ, 1 − Φ) at a cut, each accurate in its own tail: a part above the centre takes its
+        // mass as a difference of upper tails, one below as one of lower tails (no cancellation
+        // of two values near 1).
+        let (below, above) = (PHI_SHOULDER[0], PHI_SHOULDER[1]);
+        let shoulders = [(mk - SHOULDER * sk, (below, above)), (mk + SHOULDER * sk, (above, below))];
+        let part_mass = |(lo, plo): (f64, (f64, f64)), (_, phi): (f64, (f64, f64))| {
+            if lo >= mk {
+                plo.1 - phi.1
+            } else {
+                phi.0 - plo.0
+            }
+        };
+        let mut phi_lo: Option<(f64, (f64, f64))> = None;
         for w in cuts.windows(2) {
             let (a, b) = (w[0], w[1]);
             if b - a <= 0.0 {
@@ -616,17 +628,17 @@ pub(super) fn union_coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcut
             // Φ at the span's ends: the lower one is the last span's upper one where they meet.
             let pa = match phi_lo {
                 Some((x, v)) if x == a => v,
-                _ => cdf((a - mk) / sk),
+                _ => tails((a - mk) / sk),
             };
-            let pb = cdf((b - mk) / sk);
+            let pb = tails((b - mk) / sk);
             phi_lo = Some((b, pb));
             // The span cut at the shoulders inside it; each part by its rule.
             let mut lo = (a, pa);
-            for (cut, pc) in shoulders.into_iter().filter(|&(c, _)| c > a && c < b).chain([(b, pb)]) {
-                let central = lo.0 >= shoulders[0].0 && cut <= shoulders[1].0;
+            for hi in shoulders.into_iter().filter(|&(c, _)| c > a && c < b).chain([(b, pb)]) {
+                let central = lo.0 >= shoulders[0].0 && hi.0 <= shoulders[1].0;
                 let rule: &[(f64, f64)] = if central { gauss_legendre_short() } else { gauss_legendre_tail() };
-                span(lo.0, cut, rule, Some(pc - lo.1));
-                lo = (cut, pc);
+                span(lo.0, hi.0, rule, Some(part_mass(lo, hi)));
+                lo = hi;
             }
         }
     }
