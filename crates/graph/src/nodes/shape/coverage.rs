@@ -603,7 +603,10 @@ pub(super) fn union_coverage_with(pieces: &[Piece], m: DVec2, s: DVec2, shortcut
         g[k] += sz;
     };
     if spans > 2 {
-        for w in cuts.windows(2).filter(|w| w[1] > w[0]) {
+        for w in cuts.windows(2) {
+            if w[1] - w[0] <= 0.0 {
+                continue;
+            }
             span(w[0], w[1], gauss_legendre_short(), None);
         }
     } else {
