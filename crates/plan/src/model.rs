@@ -85,6 +85,18 @@ impl PlanSpec {
         p
     }
 
+    /// The cacheable outputs the materials read that the planner may choose (`exact_when_cached`:
+    /// not an output a nonlinear node also reads), each cached from `level`.
+    pub fn outputs_from(profile: &Profile, level: u8) -> PlanSpec {
+        let mut p = PlanSpec::outputs(profile);
+        for (g, nodes) in p.cached.iter_mut().enumerate() {
+            for (n, c) in nodes.iter_mut().enumerate().filter(|(_, c)| c.is_some()) {
+                *c = profile.graphs[g].nodes[n].exact_when_cached.then_some(level);
+            }
+        }
+        p
+    }
+
     /// Number of cached nodes.
     pub fn count(&self) -> usize {
         self.cached.iter().flatten().filter(|c| c.is_some()).count()

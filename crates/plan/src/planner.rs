@@ -178,16 +178,10 @@ pub fn search(model: &Model, opts: SearchOptions) -> Result<SearchResult> {
         // predicted and measured. Every level is tried (a prediction each): the descent moves
         // one node's level at a time, and from the middle level it stopped short of moving all
         // together (marble at 32², 64 spp: 0.04948 s against 0.04936 for outputs from level 11).
-        // Only outputs the planner may choose (`exact_when_cached`: an output that a nonlinear
-        // node also reads is not).
+        // Only outputs the planner may choose ([`PlanSpec::outputs_from`]).
         let mut start: Option<(PlanSpec, f64, Prediction)> = None;
         for level in 0..=max {
-            let mut outputs = PlanSpec::outputs(profile);
-            for (g, nodes) in outputs.cached.iter_mut().enumerate() {
-                for (n, c) in nodes.iter_mut().enumerate().filter(|(_, c)| c.is_some()) {
-                    *c = profile.graphs[g].nodes[n].exact_when_cached.then_some(level);
-                }
-            }
+            let outputs = PlanSpec::outputs_from(profile, level);
             if outputs.count() == 0 {
                 break;
             }

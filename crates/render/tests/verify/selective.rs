@@ -167,13 +167,8 @@ fn thresholded_plans_beat_outputs_cached_from_any_level() {
         let r = plan::search(&model, SearchOptions::with_budget(1e9)).unwrap();
         let max = profile.cache.max_level;
         for level in 0..=max {
-            // The outputs the planner may choose (see `exact_when_cached`).
-            let mut outputs = PlanSpec::outputs(&profile);
-            for (g, nodes) in outputs.cached.iter_mut().enumerate() {
-                for (n, c) in nodes.iter_mut().enumerate().filter(|(_, c)| c.is_some()) {
-                    *c = profile.graphs[g].nodes[n].exact_when_cached.then_some(level);
-                }
-            }
+            // The outputs the planner may choose.
+            let outputs = PlanSpec::outputs_from(&profile, level);
             let t = model.predict(&outputs).render_s;
             assert!(
                 r.prediction.render_s <= t * (1.0 + 1e-9),
