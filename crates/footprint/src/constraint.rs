@@ -54,6 +54,20 @@ fn coefficients(scatter: Scatter) -> (f64, f64) {
     }
 }
 
+/// [`unit_and_length`] as the unit vector and the reciprocal of the (clamped) length: one
+/// division where the vector and its derivatives would take four.
+#[inline]
+fn unit_and_inverse_length(d: DVec3) -> (DVec3, f64) {
+    let l = d.length();
+    if l > MIN_DISTANCE && l.is_finite() {
+        let inv = 1.0 / l;
+        (d * inv, inv)
+    } else {
+        let (u, l) = unit_and_length(d);
+        (u, 1.0 / l)
+    }
+}
+
 fn unit_and_length(d: DVec3) -> (DVec3, f64) {
     let l = d.length();
     if l > MIN_DISTANCE && l.is_finite() {
@@ -66,8 +80,16 @@ fn unit_and_length(d: DVec3) -> (DVec3, f64) {
 }
 
 /// `h·n` kept away from zero: `|h·n| ≥ max(MIN_COSINE |h|, MIN_HALF_VECTOR_NORM)`, sign kept.
+/// Decided on squares first: most half vectors are far from grazing, and the clamp then needs
+/// no square root.
+#[inline]
 fn clamped_hn(h: DVec3, n: DVec3) -> f64 {
     let hn = h.dot(n);
+    let hn2 = hn * hn;
+    if hn2 >= 4.0 * (MIN_COSINE * MIN_COSINE) * h.length_squared() && hn.abs() >= 2.0 * MIN_HALF_VECTOR_NORM {
+        // Twice the floors (the factors cover the squares' rounding): the test below holds.
+        return hn;
+    }
     let floor = (MIN_COSINE * h.length()).max(MIN_HALF_VECTOR_NORM);
     if hn.abs() >= floor {
         hn
@@ -130,25 +152,28 @@ pub(crate) fn constraint_derivatives_from(
 ) -> ConstraintDerivatives {
     let (t, b, n) = (cur.t, cur.b, cur.n);
 
-    let (wi, li) = unit_and_length(prev_p - cur.p);
-    let (wo, lo) = unit_and_length(next.p - cur.p);
+    let (wi, inv_li) = unit_and_inverse_length(prev_p - cur.p);
+    let (wo, inv_lo) = unit_and_inverse_length(next.p - cur.p);
     let (ci, co) = coefficients(scatter);
     let h = wi * ci + wo * co;
-    let hn = clamped_hn(h, n);
-    let s = DVec2::new(h.dot(t) / hn, h.dot(b) / hn);
-    let g1 = (t - n * s.x) / hn;
-    let g2 = (b - n * s.y) / hn;
-    let g = |v: DVec3| DVec2::new(g1.dot(v), g2.dot(v));
-    // d(ω)/d(other endpoint) applied to v.
-    let dwi = |v: DVec3| (v - wi * wi.dot(v)) * (ci / li);
-    let dwo = |v: DVec3| (v - wo * wo.dot(v)) * (co / lo);
-
-    let a = DMat2::from_cols(g(dwi(prev_tangent_map[0])), g(dwi(prev_tangent_map[1])));
-    let c = DMat2::from_cols(g(dwo(ln.tangent_map[0])), g(dwo(ln.tangent_map[1])));
-    let bpos = DMat2::from_cols(
-        -g(dwi(lc.tangent_map[0]) + dwo(lc.tangent_map[0])),
-        -g(dwi(lc.tangent_map[1]) + dwo(lc.tangent_map[1])),
-    );
+    let inv_hn = 1.0 / clamped_hn(h, n);
+    let s = DVec2::new(h.dot(t) * inv_hn, h.dot(b) * inv_hn);
+    // G = ∂s/∂h, two rows.
+    let g1 = (t - n * s.x) * inv_hn;
+    let g2 = (b - n * s.y) * inv_hn;
+    // G ∂ω/∂(endpoint) is linear in the endpoint's offset: `(c/l) (G − (G ω) ωᵀ)`, two rows
+    // each for ω_i and ω_o, formed once and applied to every tangent-map column (three
+    // divisions and a dozen dot products instead of one of each per column).
+    let rows = |w: DVec3, k: f64| [(g1 - w * g1.dot(w)) * k, (g2 - w * g2.dot(w)) * k];
+    let ri = rows(wi, ci * inv_li);
+    let ro = rows(wo, co * inv_lo);
+    let rb = [ri[0] + ro[0], ri[1] + ro[1]];
+    let apply = |r: &[DVec3; 2], p: &[DVec3; 2]| {
+        DMat2::from_cols(DVec2::new(r[0].dot(p[0]), r[1].dot(p[0])), DVec2::new(r[0].dot(p[1]), r[1].dot(p[1])))
+    };
+    let a = apply(&ri, prev_tangent_map);
+    let c = apply(&ro, &ln.tangent_map);
+    let bpos = -apply(&rb, &lc.tangent_map);
     let i_ss = DMat2::from_cols(DVec2::new(1.0 + s.x * s.x, s.x * s.y), DVec2::new(s.x * s.y, 1.0 + s.y * s.y));
     ConstraintDerivatives { a, b: bpos - i_ss * lc.shape, c }
 }

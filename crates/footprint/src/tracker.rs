@@ -104,12 +104,15 @@ impl FootprintTracker {
             crate::mat::clamped_inverse(d.c, floor)
         };
 
-        // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i.
-        let cross = b * self.cov_p_pp * a.transpose();
-        let var_g = a * self.var_pp * a.transpose() + b * self.var_p * b.transpose() + cross + cross.transpose();
+        // eq. (14): var(Δg_i) with Δg_i = A_i Δx_{i−1} + B_i Δx_i. `A cov(Δx_i, Δx_{i−1})ᵀ` and
+        // `B var(Δx_i)` serve eq. (16) too.
+        let a_cov = a * self.cov_p_pp.transpose();
+        let b_var = b * self.var_p;
+        let cross = b * a_cov.transpose();
+        let var_g = a * self.var_pp * a.transpose() + b_var * b.transpose() + cross + cross.transpose();
         // eq. (13) and eq. (16).
         let var_next = c_inv * (var_h + var_g) * c_inv.transpose();
-        let cov_next = -(c_inv * (a * self.cov_p_pp.transpose() + b * self.var_p));
+        let cov_next = -(c_inv * (a_cov + b_var));
 
         if !var_next.is_finite() || !cov_next.is_finite() {
             return self.lose();
