@@ -208,15 +208,26 @@ struct FootprintCarrier<'c, const TRACK: bool> {
     /// Footprints computed so far (starts and advances).
     computed: u32,
     /// The estimator's state after the last scattering vertex advanced through (or at the
-    /// camera), `states[cur]`, and at the hit the path reached last, `states[1 − cur]` (written
-    /// by [`Self::arrive`]): scattering there flips `cur`. A state is most of a kilobyte; copied
+    /// camera), `states[cur]`, and at a partly transparent hit the path reached last,
+    /// `states[1 − cur]` (written by [`Self::arrive`]): scattering there flips `cur` (at an
+    /// opaque hit the state advances in place). A state is most of a kilobyte; copied
     /// out of the carrier at every hit and back at every scattering vertex, it was 8 % of an
     /// untextured render.
     states: [PathFootprint; 2],
     cur: usize,
-    /// The last scattering vertex advanced through and the BSDF sample taken there; `None`
-    /// before the first.
-    last: Option<(Vertex, BsdfSample)>,
+    /// Whether [`Self::arrive`] advanced into `states[1 − cur]` (at a partly transparent
+    /// surface, which the path may pass through keeping `states[cur]`), for [`Self::scatter_at`]
+    /// to flip to. At an opaque one the path scatters or ends, and the state advances in place:
+    /// no copy of it to keep.
+    advanced_aside: bool,
+    /// The BSDF sample taken at the last scattering vertex advanced through; `None` before the
+    /// first.
+    last: Option<BsdfSample>,
+    /// That vertex, kept where the estimator reads it (ray cones and differentials; the
+    /// covariance tracker keeps its own): a quarter of a kilobyte copied at every bounce.
+    last_vertex: Vertex,
+    /// Whether the estimator reads `last_vertex`.
+    keeps_vertex: bool,
     /// The direction the last hit was reached along, when its footprint was deferred.
     arrived: Option<Vec3>,
     /// Scattering vertices after `last`, oldest first, not yet advanced through.
@@ -259,7 +270,10 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
             computed: 0,
             states: [PathFootprint::None; 2],
             cur: 0,
+            advanced_aside: false,
             last: None,
+            last_vertex: Vertex::point(glam::DVec3::ZERO),
+            keeps_vertex: settings.footprint != FootprintMode::Covariance,
             arrived: None,
             deferred: [None; DEFERRED],
             n_deferred: 0,
@@ -283,16 +297,20 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
         let n = self.n_deferred;
         // Read in place: a deferred vertex is a quarter of a kilobyte, and moving each out of
         // the queue before advancing through it doubled the copies.
-        let FootprintCarrier { deferred, states, cur, last, camera, cam, mode, spp, .. } = self;
+        let FootprintCarrier { deferred, states, cur, last, last_vertex, keeps_vertex, camera, cam, mode, spp, .. } =
+            self;
         let state = &mut states[*cur];
         for e in deferred[..n].iter().flatten() {
             match last {
                 None => *state = start_at(*mode, camera, cam, &e.vertex, *spp).0,
-                Some((pv, bs)) => {
-                    state.advance(pv, bs, e.d, &e.vertex);
+                Some(bs) => {
+                    state.advance(last_vertex, bs, e.d, &e.vertex);
                 }
             }
-            *last = Some((e.vertex, e.bs));
+            *last = Some(e.bs);
+            if *keeps_vertex {
+                *last_vertex = e.vertex;
+            }
         }
         self.computed += n as u32;
         self.n_deferred = 0;
@@ -309,10 +327,18 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
 
     /// The footprint at hit `si`, carried along direction `d` from the last scattering vertex
     /// (or the camera); on the camera ray, textures are filtered around the pixel centre's hit.
-    /// The estimator's state there is kept aside until the path scatters at `si`. Where
+    /// At an `opaque` hit, where the path scatters or ends, the estimator's state advances in
+    /// place; at a partly transparent one it is kept aside until the path scatters at `si`. Where
     /// `read` is false (the hit's material has no textures, or reads its pixel's) the footprint
     /// may be deferred: the answer then has the vertex alone.
-    fn arrive(&mut self, settings: &RenderSettings, si: &SurfaceInteraction, d: Vec3, read: bool) -> TextureFootprint {
+    fn arrive(
+        &mut self,
+        settings: &RenderSettings,
+        si: &SurfaceInteraction,
+        d: Vec3,
+        read: bool,
+        opaque: bool,
+    ) -> TextureFootprint {
         if !TRACK {
             return TextureFootprint::default();
         }
@@ -326,7 +352,8 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
             self.catch_up();
         }
         self.computed += 1;
-        let next = 1 - self.cur;
+        let next = if opaque { self.cur } else { 1 - self.cur };
+        self.advanced_aside = !opaque;
         let (var, uv_jacobian, shift) = match &self.last {
             None => {
                 // The first hit's local geometry serves the tracker's start, the recentring and
@@ -336,9 +363,11 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
                 let shift = first_vertex_shift(settings, self.cam, &v, (&local, g));
                 (var, local.uv_jacobian, shift)
             }
-            Some((pv, bs)) => {
-                self.states[next] = self.states[self.cur];
-                let var = self.states[next].advance(pv, bs, d, &v);
+            Some(bs) => {
+                if next != self.cur {
+                    self.states[next] = self.states[self.cur];
+                }
+                let var = self.states[next].advance(&self.last_vertex, bs, d, &v);
                 (var, self.states[next].uv_jacobian(&v), CentreShift::default())
             }
         };
@@ -348,7 +377,7 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
     /// The path scatters at the hit it arrived at last: it keeps the footprint there (a
     /// deferred hit joins the deferred vertices when its BSDF sample is known).
     fn scatter_at(&mut self) {
-        if TRACK && self.arrived.is_none() {
+        if TRACK && self.arrived.is_none() && self.advanced_aside {
             self.cur = 1 - self.cur;
         }
     }
@@ -360,7 +389,12 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
         }
         let Some(v) = here.vertex else { return };
         match self.arrived.take() {
-            None => self.last = Some((v, bs)),
+            None => {
+                self.last = Some(bs);
+                if self.keeps_vertex {
+                    self.last_vertex = v;
+                }
+            }
             Some(d) => {
                 if self.n_deferred == DEFERRED {
                     self.catch_up();
@@ -813,7 +847,8 @@ fn radiance_with<S: GraphSource, O: PathObserver, const TRACK: bool>(
             _ => None,
         };
         // The footprint here; the path keeps it only if it scatters here.
-        let mut here = footprints.arrive(&settings, &si, ray.d, reads_textures && shared.is_none());
+        let mut here =
+            footprints.arrive(&settings, &si, ray.d, reads_textures && shared.is_none(), !material.bsdf.is_masked());
         (here.pixel, here.shared) = (key, shared);
         if let Some(l) = tracer.emitted(shape.emitter, &si, ray.d, &last, throughput) {
             result += l;
