@@ -119,12 +119,28 @@ pub fn square_to_disk_concentric(u: Vec2) -> Vec2 {
     if a.x == 0.0 && a.y == 0.0 {
         return Vec2::ZERO;
     }
-    let (r, phi) = if a.x.abs() > a.y.abs() {
-        (a.x, (PI / 4.0) * (a.y / a.x))
+    // φ = t in the first case and π/2 − t in the second, with |t| ≤ π/4 either way: the sine and
+    // cosine of t by their series (no range reduction, and a fifth of libm's `sincosf`, which was
+    // 3 % of a Cornell box), swapped for π/2 − t.
+    if a.x.abs() > a.y.abs() {
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (a.y / a.x));
+        Vec2::new(a.x * c, a.x * s)
     } else {
-        (a.y, PI / 2.0 - (PI / 4.0) * (a.x / a.y))
-    };
-    Vec2::new(r * phi.cos(), r * phi.sin())
+        let (s, c) = sin_cos_quarter((PI / 4.0) * (a.x / a.y));
+        Vec2::new(a.y * s, a.y * c)
+    }
+}
+
+/// `(sin t, cos t)` for `|t| ≤ π/4` by their Taylor series to t⁹ and t¹⁰: the first terms left
+/// out are below 2e-9, a thirtieth of an f32 ulp at 1, so the result is as exact as f32
+/// arithmetic makes it (within 2 ulp of the rounded values; see the tests).
+#[inline]
+pub fn sin_cos_quarter(t: f32) -> (f32, f32) {
+    let t2 = t * t;
+    let s = t * (1.0 + t2 * (-1.0 / 6.0 + t2 * (1.0 / 120.0 + t2 * (-1.0 / 5040.0 + t2 * (1.0 / 362_880.0)))));
+    let c =
+        1.0 + t2 * (-0.5 + t2 * (1.0 / 24.0 + t2 * (-1.0 / 720.0 + t2 * (1.0 / 40_320.0 + t2 * (-1.0 / 3_628_800.0)))));
+    (s, c)
 }
 
 /// Cosine-weighted direction on the +z hemisphere.
@@ -236,6 +252,62 @@ impl Distribution1D {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The spacing of f32 values at `x`'s magnitude, in f64.
+    trait Ulp {
+        fn ulp_f64(self) -> f64;
+    }
+    impl Ulp for f32 {
+        fn ulp_f64(self) -> f64 {
+            let x = self.abs();
+            (f32::from_bits(x.to_bits() + 1) - x) as f64
+        }
+    }
+
+    /// The series against f64's sine and cosine over the whole quarter (and its ends): within 2
+    /// f32 ulp of the correctly rounded values; and the disk map built on it puts every point of
+    /// a 256 × 256 grid within 2e-7 of the libm form's, on the unit disk.
+    #[test]
+    fn quarter_sine_and_cosine_are_f32_exact() {
+        let ulps =
+            |a: f32, b: f64| ((a as f64 - b).abs() / (b.abs().max(f32::MIN_POSITIVE as f64) as f32).ulp_f64()).max(0.0);
+        let mut worst = 0.0f64;
+        for k in 0..=100_000 {
+            let t = (k as f32 / 100_000.0 * 2.0 - 1.0) * (PI / 4.0);
+            let (s, c) = sin_cos_quarter(t);
+            worst = worst.max(ulps(s, (t as f64).sin())).max(ulps(c, (t as f64).cos()));
+        }
+        assert!(worst <= 2.0, "worst {worst} ulp");
+        // The map in f64 as the reference: the series' points are nearer to it than the libm
+        // form's (which rounds π/2 − t before its sine and cosine) plus an f32 ulp at 1.
+        let (mut ours, mut libms) = (0.0f64, 0.0f64);
+        for i in 0..256 {
+            for j in 0..256 {
+                let u = Vec2::new((i as f32 + 0.5) / 256.0, (j as f32 + 0.5) / 256.0);
+                let a = 2.0 * u - Vec2::ONE;
+                let (r, phi, r64, phi64) = if a.x.abs() > a.y.abs() {
+                    let t = (a.y / a.x) as f64;
+                    (a.x, (PI / 4.0) * (a.y / a.x), a.x as f64, std::f64::consts::FRAC_PI_4 * t)
+                } else {
+                    let t = (a.x / a.y) as f64;
+                    (
+                        a.y,
+                        PI / 2.0 - (PI / 4.0) * (a.x / a.y),
+                        a.y as f64,
+                        std::f64::consts::FRAC_PI_2 - std::f64::consts::FRAC_PI_4 * t,
+                    )
+                };
+                let exact = glam::DVec2::new(r64 * phi64.cos(), r64 * phi64.sin());
+                let libm = Vec2::new(r * phi.cos(), r * phi.sin());
+                let d = square_to_disk_concentric(u);
+                assert!(d.length() <= 1.0 + 1e-6, "{u}: {d}");
+                ours = ours.max((d.as_dvec2() - exact).length());
+                libms = libms.max((libm.as_dvec2() - exact).length());
+            }
+        }
+        println!("concentric disk, largest distance from the f64 map: series {ours:e}, libm {libms:e}");
+        assert!(ours <= libms + 6e-8 && ours < 2e-7, "series {ours:e}, libm {libms:e}");
+    }
 
     #[test]
     fn streams_differ_and_repeat() {
