@@ -992,15 +992,9 @@ mod tests {
         let count = 64_000usize;
         for s in [&shape, &triangles] {
             let mut cells = [0usize; 16];
-            let mut state = 0x2545_f491_4f6c_dd1du64;
-            let mut next = || {
-                state ^= state << 13;
-                state ^= state >> 7;
-                state ^= state << 17;
-                (state >> 40) as f32 / (1u64 << 24) as f32
-            };
+            let mut rng = crate::sampling::Rng::new(5, 1);
             for _ in 0..count {
-                let smp = s.sample_area(Vec2::new(next(), next()));
+                let smp = s.sample_area(rng.next_2d());
                 let c = coords(smp.p);
                 assert!(c.min_element() >= -1e-5 && c.max_element() <= 1.0 + 1e-5, "{c}");
                 assert!((smp.p - o - e1 * c.x - e2 * c.y).length() < 1e-4, "off the plane");
