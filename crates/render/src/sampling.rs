@@ -169,11 +169,18 @@ pub fn square_to_uniform_sphere(u: Vec2) -> Vec3 {
 pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * PI);
 
 /// Uniform direction in the cone of half-angle `acos(cos_max)` around +z.
+///
+/// Through the concentric disk: its points are uniform in area, so their squared radius `ρ²` is
+/// uniform on [0, 1], and `cos θ = 1 − k ρ²` (with `k = 1 − cos_max`) is uniform on
+/// `[cos_max, 1]`, as a uniform cone's is; the point's direction gives the azimuth. Then
+/// `sin θ = ρ √(k (2 − k ρ²))`, without the cancellation of `√(1 − cos² θ)` in narrow cones, and
+/// without a sine and cosine of the azimuth.
 pub fn square_to_uniform_cone(u: Vec2, cos_max: f32) -> Vec3 {
-    let cos_t = 1.0 - u.y * (1.0 - cos_max);
-    let sin_t = (1.0 - cos_t * cos_t).max(0.0).sqrt();
-    let phi = 2.0 * PI * u.x;
-    Vec3::new(sin_t * phi.cos(), sin_t * phi.sin(), cos_t)
+    let k = 1.0 - cos_max;
+    let d = square_to_disk_concentric(u);
+    let r2 = d.length_squared();
+    let s = (k * (2.0 - k * r2)).max(0.0).sqrt();
+    Vec3::new(d.x * s, d.y * s, 1.0 - k * r2)
 }
 
 /// Density of [`square_to_uniform_cone`].
@@ -308,6 +315,40 @@ mod tests {
         }
         println!("concentric disk, largest distance from the f64 map: polynomials {ours:e}, libm {libms:e}");
         assert!(ours <= libms + 6e-8 && ours < 2e-7, "polynomials {ours:e}, libm {libms:e}");
+    }
+
+    /// Uniform cones, wide to narrow: unit directions inside the cone, cos θ uniform on
+    /// [cos_max, 1] and the azimuth uniform (8 bins each, within 5 standard errors), and in a
+    /// narrow cone directions that are not quantised with cos θ.
+    #[test]
+    fn uniform_cone_is_uniform() {
+        for cos_max in [-0.5f32, 0.3, 0.99, 0.999_99] {
+            let mut rng = Rng::new(3, 9);
+            let n = 40_000usize;
+            let (mut zs, mut az) = ([0usize; 8], [0usize; 8]);
+            for _ in 0..n {
+                let v = square_to_uniform_cone(rng.next_2d(), cos_max);
+                assert!((v.length() - 1.0).abs() < 1e-5, "{cos_max}: {v}");
+                assert!(v.z >= cos_max - 1e-6 && v.z <= 1.0, "{cos_max}: {v}");
+                let t = ((1.0 - v.z) / (1.0 - cos_max)).clamp(0.0, 0.999_999);
+                zs[(t * 8.0) as usize] += 1;
+                let phi = v.y.atan2(v.x) / (2.0 * PI) + 0.5;
+                az[((phi * 8.0) as usize).min(7)] += 1;
+            }
+            let (e, sd) = (n as f64 / 8.0, (n as f64 / 8.0 * 7.0 / 8.0).sqrt());
+            for k in zs.iter().chain(&az) {
+                assert!((*k as f64 - e).abs() < 5.0 * sd, "{cos_max}: {zs:?} {az:?}");
+            }
+        }
+        // In a narrow cone, cos θ has only some 170 f32 values between cos_max and 1; sin θ from
+        // the disk's radius is not quantised with it (from √(1 − cos² θ) it would be).
+        let mut rng = Rng::new(4, 2);
+        let mut sines: Vec<u32> = (0..10_000)
+            .map(|_| square_to_uniform_cone(rng.next_2d(), 0.999_99).truncate().length().to_bits())
+            .collect();
+        sines.sort_unstable();
+        sines.dedup();
+        assert!(sines.len() > 5_000, "{} distinct sines of 10000", sines.len());
     }
 
     #[test]
