@@ -180,11 +180,9 @@ pub fn search(model: &Model, opts: SearchOptions) -> Result<SearchResult> {
         // together (marble at 32², 64 spp: 0.04948 s against 0.04936 for outputs from level 11).
         // Only outputs the planner may choose ([`PlanSpec::outputs_from`]).
         let mut start: Option<(PlanSpec, f64, Prediction)> = None;
-        for level in 0..=max {
+        let any = PlanSpec::outputs_from(profile, 0).count() > 0;
+        for level in (0..=max).filter(|_| any) {
             let outputs = PlanSpec::outputs_from(profile, level);
-            if outputs.count() == 0 {
-                break;
-            }
             if let Some((t, p)) = s.score(&outputs) {
                 if start.as_ref().is_none_or(|x| t < x.1) {
                     start = Some((outputs, t, p));

@@ -226,8 +226,6 @@ struct FootprintCarrier<'c, const TRACK: bool> {
     /// That vertex, kept where the estimator reads it (ray cones and differentials; the
     /// covariance tracker keeps its own): a quarter of a kilobyte copied at every bounce.
     last_vertex: Vertex,
-    /// Whether the estimator reads `last_vertex`.
-    keeps_vertex: bool,
     /// The direction the last hit was reached along, when its footprint was deferred.
     arrived: Option<Vec3>,
     /// Scattering vertices after `last`, oldest first, not yet advanced through.
@@ -273,7 +271,6 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
             advanced_aside: false,
             last: None,
             last_vertex: Vertex::point(glam::DVec3::ZERO),
-            keeps_vertex: settings.footprint != FootprintMode::Covariance,
             arrived: None,
             deferred: [None; DEFERRED],
             n_deferred: 0,
@@ -282,6 +279,13 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
             mode: settings.footprint,
             spp: settings.spp,
         }
+    }
+
+    /// Whether the estimator reads the last scattering vertex (`last_vertex`): every one but the
+    /// covariance tracker, which keeps its own.
+    #[inline]
+    fn keeps_vertex(&self) -> bool {
+        self.mode != FootprintMode::Covariance
     }
 
     /// The estimator's state at the last scattering vertex (advanced through every deferred
@@ -297,8 +301,8 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
         let n = self.n_deferred;
         // Read in place: a deferred vertex is a quarter of a kilobyte, and moving each out of
         // the queue before advancing through it doubled the copies.
-        let FootprintCarrier { deferred, states, cur, last, last_vertex, keeps_vertex, camera, cam, mode, spp, .. } =
-            self;
+        let keeps_vertex = self.keeps_vertex();
+        let FootprintCarrier { deferred, states, cur, last, last_vertex, camera, cam, mode, spp, .. } = self;
         let state = &mut states[*cur];
         for e in deferred[..n].iter().flatten() {
             match last {
@@ -308,7 +312,7 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
                 }
             }
             *last = Some(e.bs);
-            if *keeps_vertex {
+            if keeps_vertex {
                 *last_vertex = e.vertex;
             }
         }
@@ -391,7 +395,7 @@ impl<'c, const TRACK: bool> FootprintCarrier<'c, TRACK> {
         match self.arrived.take() {
             None => {
                 self.last = Some(bs);
-                if self.keeps_vertex {
+                if self.keeps_vertex() {
                     self.last_vertex = v;
                 }
             }
